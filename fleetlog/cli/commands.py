@@ -1,0 +1,1 @@
+"""Registers every command on the app (each lives in its own module)."""

@@ -1,0 +1,499 @@
+"""The ``.alog`` text format: banner and entry lines, written and read back (MOOS_FORMAT.md §2).
+
+Pure code: strings in, strings and :class:`Entry` objects out. The same line format serves the
+``.xlog`` (§2.5); the banner serves the ``.slog``, ``.ylog`` and ``._moos`` too (§2.1).
+
+Reading follows §12's reader rule: an entry line starts with a digit (or ``-`` and a digit, for
+the negative times real pLogger writes); its value is everything after the source field's
+padding and its one separator space, minus exactly one terminator space, so leading spaces,
+empty strings, ``\\r`` and multi-line values survive. Lines that follow an entry and do not
+start like an entry or with ``%`` continue its value.
+"""
+
+from __future__ import annotations
+
+import enum
+import math
+import re
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+
+from fleetlog.errors import FormatError
+
+__all__ = [
+    "BANNER_RULE",
+    "BinaryRef",
+    "Banner",
+    "Entry",
+    "EntryParser",
+    "LineFormatter",
+    "Variant",
+    "classify_value",
+    "format_banner",
+    "format_binary_ref",
+    "format_double",
+    "format_entry",
+    "format_logstart",
+    "format_time",
+    "iter_entries",
+    "parse_banner",
+    "parse_binary_ref",
+    "source_field",
+    "split_source",
+]
+
+BANNER_RULE = "%" * 59
+DATATYPE_MARKING = "%% DATATYPE MARKING ON"
+_BINARY_OPEN = "<MOOS_BINARY>"
+_BINARY_CLOSE = "</MOOS_BINARY>"
+
+
+class Variant(enum.Enum):
+    """The two on-disk variants of pLogger (§2.3)."""
+
+    #: MOOS-IvP's bundled pLogger (2021 on): 5 decimals for times, LOGSTART ``%.16g``.
+    IVP = "ivp"
+    #: themoos essential-moos pLogger: 3 decimals for times, LOGSTART ``%.12g``.
+    EM = "em"
+
+    @property
+    def time_decimals(self) -> int:
+        """Decimals of the entry time column."""
+        return 5 if self is Variant.IVP else 3
+
+    @property
+    def logstart_digits(self) -> int:
+        """Significant digits of the banner's LOGSTART value."""
+        return 16 if self is Variant.IVP else 12
+
+
+@dataclass(frozen=True, slots=True)
+class BinaryRef:
+    """Where a binary value's bytes live in the ``.blog`` (§2.6)."""
+
+    file: str
+    offset: int
+    size: int
+
+
+@dataclass(frozen=True, slots=True)
+class Entry:
+    """One logged message as read from an alog line (or lines).
+
+    Attributes:
+        offset: seconds since LOGSTART (the banner's value), as written.
+        key: the MOOS variable name.
+        source: the source field as written: ``src[:aux][@community]``.
+        value: a float for doubles, a str for strings, a :class:`BinaryRef` for binary values.
+        text: the value exactly as written, without MarkDataType marker, double padding or
+            terminator space (for a binary value, the ``<MOOS_BINARY>`` tag).
+        lineno: the 1-based line number where the entry starts.
+    """
+
+    offset: float
+    key: str
+    source: str
+    value: float | str | BinaryRef
+    text: str
+    lineno: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class Banner:
+    """The header pLogger writes at the top of alog, slog, ylog and ``._moos`` files."""
+
+    log_file: str
+    opened: str
+    logstart: float
+    logstart_text: str
+    mark_data_type: bool
+    lines: int
+
+
+# --------------------------------------------------------------------------------------------
+# Writing
+
+
+def format_logstart(logstart: float, variant: Variant = Variant.IVP) -> str:
+    """Return LOGSTART as pLogger prints it: ``%.16g`` (IVP) or ``%.12g`` (EM), no padding."""
+    return f"{logstart:.{variant.logstart_digits}g}"
+
+
+def format_banner(
+    log_file: str,
+    logstart: float,
+    opened: str,
+    *,
+    variant: Variant = Variant.IVP,
+    mark_data_type: bool = False,
+    left_logstart: bool = False,
+) -> str:
+    """Return the 5-line (6 with MarkDataType) banner, each line ending in ``\\n``.
+
+    Args:
+        log_file: the full file name as pLogger builds it (``dir + "/" + root + ".alog"``).
+        logstart: the session's LOGSTART.
+        opened: the ``FILE OPENED ON`` text, ctime layout, without newline.
+        variant: which pLogger's LOGSTART precision to use.
+        mark_data_type: add the ``%% DATATYPE MARKING ON`` line.
+        left_logstart: left-justify LOGSTART (pLogger's slog/ylog after a restart, §2.1).
+    """
+    value = format_logstart(logstart, variant)
+    padded = value.ljust(20) if left_logstart else value.rjust(20)
+    lines = [
+        BANNER_RULE,
+        "%% LOG FILE:       " + log_file,
+        "%% FILE OPENED ON  " + opened,
+        "%% LOGSTART        " + padded,
+    ]
+    if mark_data_type:
+        lines.append(DATATYPE_MARKING)
+    lines.append(BANNER_RULE)
+    return "\n".join(lines) + "\n"
+
+
+def format_time(offset: float, variant: Variant = Variant.IVP) -> str:
+    """Return the entry time column's text, unpadded."""
+    return f"{offset:.{variant.time_decimals}f}"
+
+
+def format_double(value: float, precision: int = 5) -> str:
+    """Return a double value as pLogger writes it: ``%.Nf`` left-justified to 12.
+
+    C++ prints NaN as ``nan`` or ``-nan`` and infinities as ``inf``/``-inf``; Python agrees
+    except for the sign of NaN, which is mirrored here.
+    """
+    if math.isnan(value):
+        text = "-nan" if math.copysign(1.0, value) < 0 else "nan"
+    else:
+        text = f"{value:.{precision}f}"
+    return text.ljust(12)
+
+
+def format_binary_ref(file: str, offset: int, size: int) -> str:
+    """Return the alog value that points into the ``.blog``."""
+    return f"{_BINARY_OPEN}File={file},Offset={offset},Bytes={size}{_BINARY_CLOSE}"
+
+
+def source_field(
+    src: str,
+    aux: str = "",
+    community: str = "",
+    *,
+    log_aux: bool = False,
+    mark_external: bool = False,
+    own_community: str = "",
+) -> str:
+    """Build the source column: ``src[:aux][@community]`` per LogAuxSrc and community marking."""
+    field = src
+    if log_aux and aux:
+        field += ":" + aux
+    if mark_external and community and community != own_community:
+        field += "@" + community
+    return field
+
+
+def split_source(field: str) -> tuple[str, str, str]:
+    """Split a source column into ``(src, aux, community)``.
+
+    The community is what follows the last ``@``; the aux what follows the first ``:`` (the
+    MOOS-IvP tools split there too).
+    """
+    community = ""
+    if "@" in field:
+        field, community = field.rsplit("@", 1)
+    src, _, aux = field.partition(":")
+    return src, aux, community
+
+
+def format_entry(
+    offset: float,
+    key: str,
+    source: str,
+    value_text: str,
+    *,
+    variant: Variant = Variant.IVP,
+    binary: bool = False,
+) -> str:
+    """Return one entry line (or several, for a multi-line string) ending in ``\\n``.
+
+    ``value_text`` is the value part as it goes on disk: a padded double, a raw string (with
+    any MarkDataType marker already in front), or a binary reference.
+    """
+    head = f"{format_time(offset, variant).ljust(15)} {key.ljust(20)} {source.ljust(15)} "
+    if binary:
+        return head + value_text + "\n"
+    return head + value_text + " \n"
+
+
+class LineFormatter:
+    """Formats entry lines fast, caching the padded key/source prefix per pair.
+
+    The recorder formats tens of thousands of lines a second; the key and source columns
+    repeat, so their padded text is built once.
+    """
+
+    __slots__ = ("_prefixes", "_time_fmt", "double_precision", "mark_data_type", "variant")
+
+    def __init__(
+        self,
+        variant: Variant = Variant.IVP,
+        double_precision: int = 5,
+        *,
+        mark_data_type: bool = False,
+    ) -> None:
+        self.variant = variant
+        self.double_precision = double_precision
+        self.mark_data_type = mark_data_type
+        self._time_fmt = f"%-15.{variant.time_decimals}f "
+        self._prefixes: dict[tuple[str, str], str] = {}
+
+    def _prefix(self, key: str, source: str) -> str:
+        pair = (key, source)
+        prefix = self._prefixes.get(pair)
+        if prefix is None:
+            prefix = f"{key.ljust(20)} {source.ljust(15)} "
+            if len(self._prefixes) > 65536:  # bound the cache against key floods
+                self._prefixes.clear()
+            self._prefixes[pair] = prefix
+        return prefix
+
+    def double(self, offset: float, key: str, source: str, value: float) -> str:
+        """Return the line for a double value."""
+        text = format_double(value, self.double_precision)
+        if self.mark_data_type:
+            text = "D:" + text
+        return self._time_fmt % offset + self._prefix(key, source) + text + " \n"
+
+    def string(self, offset: float, key: str, source: str, value: str) -> str:
+        """Return the line(s) for a string value, written verbatim."""
+        if self.mark_data_type:
+            value = "S:" + value
+        return self._time_fmt % offset + self._prefix(key, source) + value + " \n"
+
+    def binary(self, offset: float, key: str, source: str, ref: BinaryRef) -> str:
+        """Return the line for a binary value stored in the ``.blog``."""
+        tag = format_binary_ref(ref.file, ref.offset, ref.size)
+        return self._time_fmt % offset + self._prefix(key, source) + tag + "\n"
+
+    def prefix(self, offset: float, key: str, source: str) -> str:
+        """Return the time, key and source columns with their spaces (the blog record head)."""
+        return self._time_fmt % offset + self._prefix(key, source)
+
+
+# --------------------------------------------------------------------------------------------
+# Reading
+
+_DOUBLE_RE = re.compile(r"-?[0-9]+(?:\.[0-9]+)?|-?nan|-?inf")
+_BINARY_RE = re.compile(r"<MOOS_BINARY>File=(.*),Offset=(-?[0-9]+),Bytes=([0-9]+)</MOOS_BINARY>")
+_TIME_RE = re.compile(r"-?[0-9]+(?:\.[0-9]*)?(?:[eE][-+]?[0-9]+)?")
+
+
+def parse_binary_ref(text: str) -> BinaryRef | None:
+    """Return the reference in a ``<MOOS_BINARY>`` value, or None if ``text`` is not one."""
+    match = _BINARY_RE.fullmatch(text)
+    if match is None:
+        return None
+    return BinaryRef(match.group(1), int(match.group(2)), int(match.group(3)))
+
+
+def classify_value(text: str, *, mark_data_type: bool = False) -> tuple[float | str | BinaryRef, str]:
+    """Decide a value's type from its text as written; return ``(value, clean_text)``.
+
+    With MarkDataType the ``D:``/``S:`` marker decides. Without it, a value that is exactly a
+    double as pLogger pads it (``%.Nf`` left-justified to 12, or wider with no padding) is a
+    double and anything else a string. A ``<MOOS_BINARY>`` tag is binary either way.
+    """
+    if text.startswith(_BINARY_OPEN):
+        ref = parse_binary_ref(text)
+        if ref is not None:
+            return ref, text
+    if mark_data_type:
+        if text.startswith("D:"):
+            body = text[2:].rstrip(" ")
+            if _DOUBLE_RE.fullmatch(body):
+                return float(body), body
+        elif text.startswith("S:"):
+            return text[2:], text[2:]
+        return text, text
+    body = text.rstrip(" ")
+    if body and (len(text) == len(body) or len(text) == 12) and _DOUBLE_RE.fullmatch(body):
+        return float(body), body
+    return text, text
+
+
+def _entry_fields(line: str) -> tuple[str, str, str, str] | None:
+    """Split an entry's first line into time, key, source and raw value (with terminator).
+
+    Follows the writer's columns: each field is left-justified to its width (15, 20, 15) or
+    wider, then one separator space. Returns None when the line is not shaped like an entry.
+    """
+    sp = line.find(" ")
+    if sp <= 0:
+        return None
+    time_text = line[:sp]
+    if not _TIME_RE.fullmatch(time_text):
+        return None
+    pos = max(15, sp) + 1
+    if line[sp:pos].strip(" "):
+        return None
+    key_end = line.find(" ", pos)
+    if key_end <= pos:
+        return None
+    key = line[pos:key_end]
+    pos = max(pos + 20, key_end) + 1
+    if line[key_end:pos].strip(" "):
+        return None
+    src_end = line.find(" ", pos)
+    if src_end < 0:
+        return None
+    source = line[pos:src_end]
+    vpos = max(pos + 15, src_end) + 1
+    if line[src_end:vpos].strip(" ") or len(line) < vpos:
+        return None
+    return time_text, key, source, line[vpos:]
+
+
+def _starts_entry(line: str) -> bool:
+    if not line:
+        return False
+    c = line[0]
+    return c.isdigit() or (c == "-" and len(line) > 1 and line[1].isdigit())
+
+
+class EntryParser:
+    """Incremental alog entry parser: feed lines, get entries; keeps multi-line values whole.
+
+    Lines are given without their ``\\n``. Banner and comment lines (``%``) are skipped. The
+    parser is strict only where a real file cannot differ: a line that starts like an entry
+    but is not shaped like one continues the previous value, as a continuation line would.
+
+    Attributes:
+        mark_data_type: read ``D:``/``S:`` markers (set from the banner by :func:`iter_entries`).
+        orphans: continuation lines seen before any entry (a file cut at its head).
+    """
+
+    def __init__(self, *, mark_data_type: bool = False) -> None:
+        self.mark_data_type = mark_data_type
+        self.orphans = 0
+        self._head: tuple[float, str, str, int] | None = None
+        self._parts: list[str] = []
+
+    def feed(self, line: str, lineno: int = 0) -> Entry | None:
+        """Take the next line; return the entry it completes, if any."""
+        if line.startswith("%"):
+            return self._finish()
+        if _starts_entry(line):
+            fields = _entry_fields(line)
+            if fields is not None:
+                done = self._finish()
+                time_text, key, source, raw = fields
+                self._head = (float(time_text), key, source, lineno)
+                self._parts = [raw]
+                return done
+        if self._head is None:
+            self.orphans += 1
+            return None
+        self._parts.append(line)
+        return None
+
+    def close(self, *, complete: bool = True) -> Entry | None:
+        """Finish the last entry.
+
+        Args:
+            complete: False when the last line had no ``\\n`` (a truncated file); its entry is
+                then dropped, because its value may be cut short.
+        """
+        if not complete:
+            self._head = None
+            self._parts = []
+            return None
+        return self._finish()
+
+    def _finish(self) -> Entry | None:
+        head = self._head
+        if head is None:
+            return None
+        self._head = None
+        raw = "\n".join(self._parts)
+        self._parts = []
+        if raw.startswith(_BINARY_OPEN) and raw.endswith(_BINARY_CLOSE):
+            text = raw
+        elif raw.endswith(" "):
+            text = raw[:-1]
+        else:
+            # No terminator space: not what pLogger writes, but keep the value as it stands.
+            text = raw
+        value, clean = classify_value(text, mark_data_type=self.mark_data_type)
+        offset, key, source, lineno = head
+        return Entry(offset, key, source, value, clean, lineno)
+
+
+def parse_banner(lines: list[str], path: str | None = None) -> Banner:
+    """Parse the banner at the top of a bannered file.
+
+    Args:
+        lines: the file's first lines, without ``\\n`` (at least the banner's).
+        path: the file's name, for error messages.
+
+    Raises:
+        FormatError: the lines are not a pLogger banner.
+    """
+    if not lines or lines[0] != BANNER_RULE:
+        msg = f"expected a banner line of 59 '%', got {lines[0][:40]!r}" if lines else "empty"
+        raise FormatError(msg, path, 1)
+    fields: dict[str, str] = {}
+    mark = False
+    for index, line in enumerate(lines[1:], start=2):
+        if line == BANNER_RULE:
+            if "LOGSTART" not in fields:
+                raise FormatError("banner has no LOGSTART line", path, index)
+            text = fields["LOGSTART"].strip()
+            try:
+                logstart = float(text)
+            except ValueError:
+                raise FormatError(f"LOGSTART {text!r} is not a number", path, index) from None
+            return Banner(
+                fields.get("LOG FILE", ""), fields.get("FILE OPENED ON", ""), logstart, text,
+                mark, index,
+            )
+        if line == DATATYPE_MARKING:
+            mark = True
+        elif line.startswith("%% LOG FILE:"):
+            fields["LOG FILE"] = line[len("%% LOG FILE:") :].strip(" ")
+        elif line.startswith("%% FILE OPENED ON"):
+            fields["FILE OPENED ON"] = line[len("%% FILE OPENED ON") :].strip(" ")
+        elif line.startswith("%% LOGSTART"):
+            fields["LOGSTART"] = line[len("%% LOGSTART") :]
+        elif not line.startswith("%"):
+            raise FormatError("banner ends before its closing line of 59 '%'", path, index)
+    raise FormatError("banner is not closed by a line of 59 '%'", path, len(lines))
+
+
+def iter_entries(lines: Iterable[str], *, mark_data_type: bool = False) -> Iterator[Entry]:
+    """Yield the entries of alog text given as ``\\n``-terminated lines.
+
+    A last line without ``\\n`` is treated as truncated: its entry is dropped. The banner's
+    ``DATATYPE MARKING ON`` line switches marker reading on.
+    """
+    parser = EntryParser(mark_data_type=mark_data_type)
+    complete = True
+    for lineno, line in enumerate(lines, start=1):
+        if line.endswith("\n"):
+            body = line[:-1]
+        else:
+            complete = False
+            body = line
+        if body == DATATYPE_MARKING:
+            parser.mark_data_type = True
+        if not complete:
+            # A cut line that starts a new entry (or a comment) proves the entry before it
+            # was whole; a cut continuation line leaves that entry's value unknown.
+            complete = body.startswith("%") or _starts_entry(body)
+            break
+        entry = parser.feed(body, lineno)
+        if entry is not None:
+            yield entry
+    last = parser.close(complete=complete)
+    if last is not None:
+        yield last

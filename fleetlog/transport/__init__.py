@@ -1,0 +1,1 @@
+"""The only package that imports zenoh: session options, publish/subscribe/query helpers."""
