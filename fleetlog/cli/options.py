@@ -1,0 +1,108 @@
+"""The Zenoh options every command that talks to Zenoh shares (as zenoh-python's examples)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from fleetlog.errors import FormatError, UsageError
+from fleetlog.transport.session import SessionOptions
+from fleetlog.wire.keys import DEFAULT_ROOT, check_root
+
+__all__ = [
+    "Config",
+    "Connect",
+    "Listen",
+    "Mode",
+    "NoScouting",
+    "Root",
+    "session_options",
+]
+
+_ZENOH = "Zenoh"
+
+Mode = Annotated[
+    str | None,
+    typer.Option(
+        "-m", "--mode", help="Zenoh session mode: peer (default) or client.",
+        rich_help_panel=_ZENOH,
+    ),
+]
+Connect = Annotated[
+    list[str] | None,
+    typer.Option(
+        "-e", "--connect", metavar="ENDPOINT",
+        help="Endpoint to connect to, e.g. tcp/192.168.1.10:7447 (repeatable).",
+        rich_help_panel=_ZENOH,
+    ),
+]
+Listen = Annotated[
+    list[str] | None,
+    typer.Option(
+        "-l", "--listen", metavar="ENDPOINT",
+        help="Endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable).",
+        rich_help_panel=_ZENOH,
+    ),
+]
+Config = Annotated[
+    Path | None,
+    typer.Option(
+        "-c", "--config", metavar="FILE", help="A Zenoh JSON5 configuration file.",
+        rich_help_panel=_ZENOH,
+    ),
+]
+NoScouting = Annotated[
+    bool,
+    typer.Option(
+        "--no-multicast-scouting", help="Do not discover peers by multicast.",
+        rich_help_panel=_ZENOH,
+    ),
+]
+Root = Annotated[
+    str,
+    typer.Option("--root", help="Key root of the fleet's keys.", rich_help_panel=_ZENOH),
+]
+
+
+def session_options(
+    mode: str | None,
+    connect: list[str] | None,
+    listen: list[str] | None,
+    config: Path | None,
+    no_multicast_scouting: bool,
+) -> SessionOptions:
+    """Build SessionOptions from the shared command-line options.
+
+    Raises:
+        UsageError: an option is unusable (unknown mode, missing config file).
+    """
+    if mode is not None and mode not in ("peer", "client", "router"):
+        msg = f"--mode must be peer, client or router, not {mode!r}"
+        raise UsageError(msg)
+    if config is not None and not config.is_file():
+        msg = f"Zenoh configuration file {config} does not exist"
+        raise UsageError(msg)
+    return SessionOptions(
+        mode=mode,
+        connect=tuple(connect or ()),
+        listen=tuple(listen or ()),
+        config=config,
+        multicast_scouting=not no_multicast_scouting,
+    )
+
+
+def checked_root(root: str) -> str:
+    """Validate ``--root``.
+
+    Raises:
+        UsageError: the root cannot prefix keys.
+    """
+    try:
+        return check_root(root)
+    except FormatError as err:
+        raise UsageError(str(err)) from None
+
+
+DEFAULT = DEFAULT_ROOT

@@ -1,0 +1,115 @@
+"""``fleetlog record``: pLogger over Zenoh, one per vehicle."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from fleetlog.cli.app import app
+from fleetlog.cli.options import Config, Connect, Listen, Mode, NoScouting, Root, checked_root, session_options
+from fleetlog.errors import UsageError
+from fleetlog.moos.mission import LoggerConfig, parse_mission
+from fleetlog.recorder.engine import Recorder
+from fleetlog.recorder.service import RecorderService, ServiceOptions
+
+__all__ = ["load_config", "record"]
+
+
+def load_config(mission: Path | None, app_name: str) -> LoggerConfig:
+    """Read the pLogger configuration from a mission file, or pLogger's defaults without one.
+
+    Raises:
+        UsageError: the mission file cannot be read.
+        MissionError: the mission file is malformed (names the file and line).
+    """
+    if mission is None:
+        return LoggerConfig.default(app_name)
+    try:
+        text = mission.read_bytes().decode("utf-8", "surrogateescape")
+    except FileNotFoundError:
+        msg = f"mission file {mission} does not exist"
+        raise UsageError(msg) from None
+    except OSError as err:
+        msg = f"cannot read mission file {mission}: {err.strerror}"
+        raise UsageError(msg) from None
+    return parse_mission(text, str(mission), env=os.environ).logger_config(app_name)
+
+
+def _default_vehicle() -> str:
+    return socket.gethostname().split(".")[0] or "vehicle"
+
+
+@app.command()
+def record(
+    mission: Annotated[
+        Path | None,
+        typer.Argument(help="MOOS mission file with a 'ProcessConfig = pLogger' block.", show_default=False),
+    ] = None,
+    vehicle: Annotated[
+        str | None,
+        typer.Option("--vehicle", "-v", help="Vehicle to record [default: the mission's Community, else the host name]."),
+    ] = None,
+    app_name: Annotated[
+        str, typer.Option("--app-name", help="The mission block to read, as pLogger's second argument.")
+    ] = "pLogger",
+    copy_dir: Annotated[
+        list[Path] | None,
+        typer.Option("--copy-dir", help="Directory COPY_FILE_REQUEST may read from (repeatable; the mission's directory always may)."),
+    ] = None,
+    root: Root = "fleet",
+    mode: Mode = None,
+    connect: Connect = None,
+    listen: Listen = None,
+    config: Config = None,
+    no_multicast_scouting: NoScouting = False,
+) -> None:
+    """Record a vehicle's MOOS variables from Zenoh into MOOS log sessions, as pLogger does.
+
+    Without a mission file it logs every variable of the vehicle into ./MOOSLog_<time>/ using
+    an embedded Zenoh peer. Stop it with Ctrl-C (SIGINT) or SIGTERM: everything received is
+    written and the files are closed.
+    """
+    key_root = checked_root(root)
+    zopts = session_options(mode, connect, listen, config, no_multicast_scouting)
+    cfg = load_config(mission, app_name)
+    veh = vehicle or cfg.community or _default_vehicle()
+    if not veh:
+        msg = "the vehicle name must not be empty"
+        raise UsageError(msg)
+    mission_path = mission.resolve() if mission is not None else None
+    dirs: list[Path] = []
+    if mission_path is not None:
+        dirs.append(mission_path.parent)
+        dirs.extend(mission_path.parent / d for d in cfg.copy_file_dirs)
+    dirs.extend(copy_dir or ())
+    service = RecorderService(
+        cfg,
+        ServiceOptions(
+            vehicle=veh,
+            root=key_root,
+            zenoh=zopts,
+            mission_path=mission_path,
+            copy_dirs=tuple(dirs),
+        ),
+    )
+
+    def on_signal(signum: int, frame: object) -> None:
+        service.stop()
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+
+    def ready(recorder: Recorder) -> None:
+        where = recorder.session.directory if recorder.session else "?"
+        print(f"fleetlog: recording vehicle {veh!r} into {where} (Ctrl-C to stop)", file=sys.stderr, flush=True)
+
+    view = service.run(on_ready=ready)
+    print(f"fleetlog: stopped: {view.summary()}", file=sys.stderr)
+    for err in view.publish_errors[:3]:
+        print(f"fleetlog: warning: {err}", file=sys.stderr)

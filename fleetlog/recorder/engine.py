@@ -1,0 +1,533 @@
+"""The pLogger engine: what to log where, throttles, commands, restart, monitor, timers.
+
+The engine has no Zenoh in it: it takes MOOS messages (:meth:`Recorder.handle`), a clock and a
+``publish`` function for what pLogger posts itself (MOOS_DEBUG, LOGGER_DIRECTORY,
+PLOGGER_STATUS), which come back through the subscription and get logged as pLogger's own
+posts come back through the MOOSDB. Its timing (throttles, slog rows, MONITOR) is therefore
+tested with a fake clock and real files.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from fleetlog.errors import FleetlogError, MissionError, StorageError
+from fleetlog.moos.alog import LineFormatter, Variant, source_field
+from fleetlog.moos.mission import LoggerConfig, LogSpec, parse_log_spec
+from fleetlog.moos.patterns import Verdict, WildcardClassifier, name_to_chunk
+from fleetlog.moos.slog import SlogTable, SlotPatch
+from fleetlog.moos.ylog import format_ylog_line
+from fleetlog.storage.session import SessionLayout, SessionWriter
+from fleetlog.wire.message import MoosMessage
+
+__all__ = ["SKEW_TOLERANCE", "Recorder", "RecorderStats"]
+
+#: pLogger's (MOOSMsg's) skew tolerance, seconds
+SKEW_TOLERANCE = 5.0
+#: MONITOR's check interval and tolerance, and LOGGER_DIRECTORY's republish interval
+MONITOR_INTERVAL = 10.0
+#: CMOOSApp's status period
+STATUS_INTERVAL = 2.0
+_SYSTEM_VARS = ("MOOS_DEBUG", "MOOS_SYSTEM")
+
+Publish = Callable[[MoosMessage], None]
+
+
+@dataclass
+class RecorderStats:
+    """What the recorder did with what it received; nothing is lost without a count here."""
+
+    received: int = 0
+    logged: int = 0
+    excluded: int = 0
+    ignored: int = 0
+    throttled: int = 0
+    skewed: int = 0
+    garbled: int = 0
+    lost: int = 0
+    write_errors: int = 0
+    refused_copies: int = 0
+    sessions: int = 0
+    last_error: str = ""
+
+    def as_dict(self) -> dict[str, int | str]:
+        """Return the counters as a dict (for the status publication and query)."""
+        return dict(self.__dict__)
+
+
+@dataclass(slots=True)
+class _Var:
+    """Per-variable state, built once per name (the hot path reads only this)."""
+
+    verdict: Verdict
+    period: float
+    system: bool
+    last_logged: float = -1e300
+    last_seen: float | None = None
+
+
+@dataclass
+class _Timers:
+    monitor: float = 0.0
+    status: float = 0.0
+
+
+@dataclass
+class _Commands:
+    restart: str = "LOGGER_RESTART"
+    command: str = "PLOGGER_CMD"
+    extra: set[str] = field(default_factory=set)
+
+
+class Recorder:
+    """One vehicle's pLogger: sessions on disk from a stream of MOOS messages.
+
+    Args:
+        config: the pLogger configuration (mission block, or the defaults).
+        vehicle: the vehicle (MOOS community) recorded; the recorder's own posts use it.
+        publish: sends a message the recorder posts itself (MOOS_DEBUG, LOGGER_DIRECTORY, …).
+        mission_path: the mission file (backed up as ``._moos``), if any.
+        cwd: where relative paths start (the process's cwd by default).
+        copy_dirs: directories COPY_FILE_REQUEST may read from (resolved).
+        clock: the wall clock, seconds since the epoch.
+        subscribe: asks the transport to deliver a variable added by LOG_REQUEST.
+    """
+
+    def __init__(
+        self,
+        config: LoggerConfig,
+        *,
+        vehicle: str,
+        publish: Publish,
+        mission_path: Path | None = None,
+        cwd: Path | None = None,
+        copy_dirs: Sequence[Path] = (),
+        clock: Callable[[], float] = time.time,
+        subscribe: Callable[[str], None] | None = None,
+    ) -> None:
+        self.config = config
+        self.vehicle = vehicle
+        self._publish = publish
+        self._clock = clock
+        self._subscribe = subscribe
+        self._cwd = Path.cwd() if cwd is None else cwd
+        self.mission_path = mission_path
+        self.copy_dirs = tuple(p.resolve() for p in copy_dirs)
+        self.app_name = config.app_name
+        self.stats = RecorderStats()
+        #: LOGSTART: taken at construction, before Zenoh connects, as CMOOSApp does
+        self.logstart = clock()
+        self.started = self.logstart
+        self._variant = Variant.EM if config.variant == "em" else Variant.IVP
+        self._fmt = LineFormatter(
+            self._variant, config.double_precision, mark_data_type=config.mark_data_type
+        )
+        specs: dict[str, LogSpec] = {}
+        for spec in config.log_specs:
+            specs.setdefault(spec.var, spec)
+        self._specs = specs
+        self._classifier = WildcardClassifier(
+            log_vars=list(specs),
+            patterns=config.wildcard_patterns,
+            omit_patterns=config.wildcard_omit_patterns,
+            exclusion_log=config.wildcard_exclusion_log,
+            wildcard_enabled=config.wildcard_logging,
+        )
+        self._vars: dict[str, _Var] = {}
+        self._sources: dict[tuple[str, str, str], str] = {}
+        self._cmd = _Commands(command=config.app_name.upper() + "_CMD")
+        self.monitored = [s.var for s in specs.values() if s.monitor]
+        sync_columns = [s.var for s in specs.values() if s.sync]
+        self.synclog = (
+            SlogTable(sync_columns, config.dynamic_sync_log_columns) if config.sync_log else None
+        )
+        self._last_row = -1e300
+        self._timers = _Timers(monitor=self.logstart, status=self.logstart)
+        self.session: SessionWriter | None = None
+        self._dirty = False
+        self._unflushed_since: float | None = None
+
+    # ---------------------------------------------------------------------------------------
+    # Sessions
+
+    def layout(self) -> SessionLayout:
+        """Return the session layout the configuration describes."""
+        cfg = self.config
+        return SessionLayout(
+            file=cfg.file,
+            path=cfg.path,
+            timestamp=cfg.file_timestamp,
+            utc=cfg.utc_log_directories,
+            variant=self._variant,
+            compression=cfg.compress_alogs,
+            sync_log=cfg.sync_log,
+            exclusion_log=cfg.wildcard_exclusion_log,
+            mark_data_type=cfg.mark_data_type,
+            summary_file=cfg.logging_directory_summary_file,
+            mission_path=self.mission_path,
+            helm_task_file=cfg.helm_task_file,
+        )
+
+    def start(self) -> SessionWriter:
+        """Open the first session and announce it.
+
+        Raises:
+            StorageError: no session directory could be created at all.
+        """
+        return self._open_session()
+
+    def _open_session(self) -> SessionWriter:
+        now = self._clock()
+        session = SessionWriter.open(self.layout(), self.logstart, when=now, cwd=self._cwd)
+        self.session = session
+        self.stats.sessions += 1
+        if session.fallback:
+            self.debug(
+                f"could not create {self.config.path}/{session.root}: "
+                f"logging to the fallback {session.directory}"
+            )
+        if self.synclog is not None and session.slog is not None:
+            text = self.synclog.start(session.banner(".slog", now), now - self.logstart)
+            self._write_slog(text)
+        self.post("LOGGER_DIRECTORY", session.directory)
+        return session
+
+    def restart(self) -> None:
+        """Close the current session and open a new one (LOGGER_RESTART, §6.3 with §12's fixes).
+
+        Every file is reopened (xlog and blog too), LOGSTART starts afresh, and a
+        time-stamped directory is never reused.
+        """
+        old = self.session
+        if old is not None:
+            self.debug(f"Closing : {Path(old.directory).name}")
+            self._close_session()
+        self.logstart = self._clock()
+        try:
+            new = self._open_session()
+        except StorageError as err:
+            self._storage_failed(err, lost=0)
+            return
+        self.debug(f"Now Logging to : {Path(new.directory).name}")
+
+    def _close_session(self) -> None:
+        session = self.session
+        self.session = None
+        if session is None:
+            return
+        try:
+            session.close()
+        except StorageError as err:
+            self._storage_failed(err, lost=0)
+
+    def stop(self) -> None:
+        """Flush and close everything (clean shutdown)."""
+        self._close_session()
+
+    def subscription_chunks(self) -> list[str]:
+        """Return the variable key chunks to subscribe to: logged names and the commands."""
+        commands = [name_to_chunk(self._cmd.restart), name_to_chunk(self._cmd.command)]
+        return [*self._classifier.key_suffixes(), *commands]
+
+    # ---------------------------------------------------------------------------------------
+    # Outgoing
+
+    def post(self, name: str, value: float | str) -> None:
+        """Publish a message as pLogger (it comes back and is logged like any other)."""
+        now = self._clock()
+        self._publish(MoosMessage(name, value, now, self.app_name, "", self.vehicle))
+
+    def debug(self, text: str) -> None:
+        """Post a MOOS_DEBUG message from the recorder."""
+        self.post("MOOS_DEBUG", text)
+
+    # ---------------------------------------------------------------------------------------
+    # Incoming (the hot path)
+
+    def _var(self, name: str) -> _Var:
+        verdict = self._classifier.classify(name)
+        spec = self._specs.get(name)
+        if spec is not None:
+            period = spec.period
+        elif name == self._cmd.restart:
+            period = 0.5
+        else:
+            period = 0.0
+        var = _Var(verdict, period, name.upper() in _SYSTEM_VARS)
+        if len(self._vars) > 65536:
+            self._vars.clear()
+        self._vars[name] = var
+        return var
+
+    def _source(self, msg: MoosMessage) -> str:
+        ident = (msg.source, msg.aux, msg.community)
+        text = self._sources.get(ident)
+        if text is None:
+            cfg = self.config
+            text = source_field(
+                msg.source or "?",
+                msg.aux,
+                msg.community,
+                log_aux=cfg.log_aux_src,
+                mark_external=cfg.mark_external_community_messages,
+                own_community=self.vehicle,
+            )
+            if len(self._sources) > 4096:
+                self._sources.clear()
+            self._sources[ident] = text
+        return text
+
+    def handle(self, msg: MoosMessage, *, garbled: bool = False) -> None:
+        """Log one received message (and act on it if it is a command)."""
+        stats = self.stats
+        stats.received += 1
+        if garbled:
+            stats.garbled += 1
+        name = msg.name
+        var = self._vars.get(name) or self._var(name)
+        is_command = name == self._cmd.restart or name == self._cmd.command
+        now = self._clock()
+        var.last_seen = now
+        if var.period > 0.0:
+            # The MOOSDB's minimum delivery interval: posts inside it are not delivered.
+            if now - var.last_logged < var.period:
+                stats.throttled += 1
+                return
+            var.last_logged = now
+        verdict = var.verdict
+        session = self.session
+        if session is None:
+            if verdict is not Verdict.IGNORE or var.system:
+                stats.lost += 1
+            if is_command:
+                self._command(msg)
+            return
+        stamp = msg.time
+        if stamp < self.logstart or abs(stamp - now) > SKEW_TOLERANCE:
+            stats.skewed += 1
+            stamp = now
+        offset = stamp - self.logstart
+        try:
+            if verdict is Verdict.ALOG:
+                if self.config.async_log:
+                    session.alog.write(self._line(session, offset, name, msg))
+                stats.logged += 1
+            elif verdict is Verdict.XLOG:
+                if session.xlog is not None:
+                    session.xlog.write(self._line(session, offset, name, msg))
+                stats.excluded += 1
+            else:
+                stats.ignored += 1
+            if var.system and session.ylog is not None:
+                value = msg.value
+                if not isinstance(value, bytes):
+                    session.ylog.write(format_ylog_line(offset, name, msg.source, value))
+            if self.synclog is not None:
+                self.synclog.update(name, msg.value)
+        except StorageError as err:
+            self._storage_failed(err, lost=1)
+        else:
+            if self._unflushed_since is None:
+                self._unflushed_since = now
+        if is_command:
+            self._command(msg)
+
+    def _line(self, session: SessionWriter, offset: float, name: str, msg: MoosMessage) -> str:
+        value = msg.value
+        source = self._source(msg)
+        if isinstance(value, str):
+            return self._fmt.string(offset, name, source, value)
+        if isinstance(value, bytes):
+            ref = session.write_blog(self._fmt.prefix(offset, name, source), value)
+            return self._fmt.binary(offset, name, source, ref)
+        return self._fmt.double(offset, name, source, value)
+
+    # ---------------------------------------------------------------------------------------
+    # Commands
+
+    def _command(self, msg: MoosMessage) -> None:
+        if msg.name == self._cmd.restart:
+            self.restart()
+            return
+        value = msg.value
+        if not isinstance(value, str):
+            kind = "binary value" if isinstance(value, bytes) else "double"
+            self.debug(f"{self._cmd.command} must be a string, got a {kind}: ignored")
+            return
+        text = value.replace(" ", "").replace("\t", "")
+        task, sep, argument = text.partition("=")
+        if not sep:
+            self.debug(f"{self._cmd.command} {value!r} is not TASK=VALUE: ignored")
+            return
+        upper = task.upper()
+        if upper == "LOG_REQUEST":
+            self._log_request(argument)
+        elif upper == "COPY_FILE_REQUEST":
+            self._copy_file(argument)
+        else:
+            self.debug(f"Dynamic command {task} is not supported")
+
+    def _log_request(self, argument: str) -> None:
+        try:
+            spec = parse_log_spec(argument)
+        except MissionError as err:
+            self.debug(f"failed to process dynamic log request {argument!r}: {err.reason}")
+            return
+        if spec.var in self._specs or not self._classifier.add_log_var(spec.var):
+            self.debug("failed to process dynamic log request  - see pLogger output\n")
+            return
+        self._specs[spec.var] = spec
+        self._vars.pop(spec.var, None)
+        if spec.monitor:
+            self.monitored.append(spec.var)
+        if self._subscribe is not None:
+            self._subscribe(spec.var)
+        if self.synclog is not None:
+            had_free = bool(self.synclog.placeholders)
+            claim = self.synclog.claim(spec.var, self._clock() - self.logstart, nosync=not spec.sync)
+            if claim is not None:
+                if spec.sync and not had_free:
+                    self.debug(f"no free slog column for {spec.var}: logged to the alog only")
+                self._write_slog(claim.text, claim.patch)
+
+    def _copy_file(self, argument: str) -> None:
+        requested = argument
+        source = Path(requested)
+        if not source.is_absolute():
+            source = self._cwd / source
+        try:
+            resolved = source.resolve(strict=True)
+        except (OSError, RuntimeError):
+            self.debug("failed to open file for reading")
+            return
+        allowed = self.copy_dirs
+        if not any(resolved.is_relative_to(d) for d in allowed):
+            self.stats.refused_copies += 1
+            self.debug(
+                f"refused COPY_FILE_REQUEST for {requested}: outside the directories "
+                "the recorder may copy from"
+            )
+            return
+        if not resolved.is_file():
+            self.debug("failed to open file for reading")
+            return
+        if self.session is None:
+            return
+        try:
+            self.session.copy_file(resolved, requested)
+        except StorageError:
+            self.debug("failed to open file for writing")
+
+    # ---------------------------------------------------------------------------------------
+    # Timers and flushing
+
+    def tick(self) -> None:
+        """Run what is due: slog rows, MONITOR and LOGGER_DIRECTORY, status, flushing."""
+        now = self._clock()
+        if (
+            self.synclog is not None
+            and self.session is not None
+            and now - self._last_row > self.config.sync_period
+        ):
+            self._last_row = now
+            self._write_slog(self.synclog.row(now - self.logstart))
+        if now - self._timers.monitor >= MONITOR_INTERVAL:
+            self._timers.monitor = now
+            self._monitor(now)
+            if self.session is not None:
+                self.post("LOGGER_DIRECTORY", self.session.directory)
+        if now - self._timers.status >= STATUS_INTERVAL:
+            self._timers.status = now
+            self.post(self.app_name.upper() + "_STATUS", self.status_text(now))
+
+    def _write_slog(self, text: str, patch: SlotPatch | None = None) -> None:
+        session = self.session
+        if session is None or session.slog is None:
+            return
+        try:
+            if patch is not None:
+                session.slog.patch(patch.offset, patch.data)
+            session.slog.write(text)
+        except StorageError as err:
+            self._storage_failed(err, lost=0)
+
+    def _monitor(self, now: float) -> None:
+        missing = [
+            name
+            for name in self.monitored
+            if (var := self._vars.get(name)) is None
+            or var.last_seen is None
+            or now - var.last_seen > MONITOR_INTERVAL
+        ]
+        if not missing:
+            return
+        n = len(missing)
+        if n == 1:
+            self.debug("1 monitored variable is not being logged\n")
+        else:
+            self.debug(f"{n} monitored variables are not being logged\n")
+        for name in missing:
+            self.debug(f'Monitored Variable "{name}" is not appearing')
+
+    def status_text(self, now: float) -> str:
+        """Return the PLOGGER_STATUS text: CMOOSApp's fields, LogAuxSrc, and the counters."""
+        s = self.stats
+        directory = self.session.directory if self.session else ""
+        return (
+            f"AppErrorFlag={'true' if s.lost else 'false'},Uptime={now - self.started:.6g},"
+            f"MOOSName={self.app_name},LogAuxSrc={'true' if self.config.log_aux_src else 'false'},"
+            f"Received={s.received},Logged={s.logged},Excluded={s.excluded},"
+            f"Throttled={s.throttled},Skewed={s.skewed},Garbled={s.garbled},Lost={s.lost},"
+            f"WriteErrors={s.write_errors},Sessions={s.sessions},Directory={directory}"
+        )
+
+    def flush_due(self, max_delay: float = 0.01) -> bool:
+        """Return True when written lines have waited ``max_delay`` or more for a flush."""
+        since = self._unflushed_since
+        return since is not None and self._clock() - since >= max_delay
+
+    def flush(self) -> None:
+        """Hand what was written to the OS (compressed streams per their interval)."""
+        self._unflushed_since = None
+        session = self.session
+        if session is None:
+            return
+        try:
+            session.flush(self._clock())
+        except StorageError as err:
+            self._storage_failed(err, lost=0)
+
+    def _storage_failed(self, err: FleetlogError, *, lost: int) -> None:
+        """Count, report and fall back: a full or read-only disk must not stop the recorder."""
+        stats = self.stats
+        stats.lost += lost
+        stats.write_errors += 1
+        first = stats.last_error != str(err)
+        stats.last_error = str(err)
+        if first:
+            self.debug(f"write error, samples are being lost: {err}")
+        # Drop the broken session and try pLogger's fallback (the working directory).
+        session = self.session
+        self.session = None
+        if session is not None:
+            try:
+                session.close()
+            except StorageError:
+                pass
+        if session is not None and not session.fallback:
+            layout = self.layout()
+            fallback = SessionLayout(**{**layout.__dict__, "path": "."})
+            try:
+                self.session = SessionWriter.open(
+                    fallback, self.logstart, when=self._clock(), cwd=self._cwd
+                )
+            except StorageError as again:
+                stats.last_error = str(again)
+                self.debug(f"fallback failed too, samples are being lost: {again}")
+                return
+            self.stats.sessions += 1
+            self.debug(f"now logging to the fallback {self.session.directory}")
+            self.post("LOGGER_DIRECTORY", self.session.directory)

@@ -1,0 +1,306 @@
+"""One pLogger session directory on disk: its files, banners, copies and the hint file.
+
+MOOS_FORMAT.md §1 is the layout: ``<path>/<root>/<root>.{alog,ylog,blog,_moos}``, ``.slog``
+with SyncLog, ``.xlog`` with the exclusion log, ``.alog.zst``/``.alog.gz`` when compressing,
+``<root>._hoof`` for a pHelm TaskFile, copies from COPY_FILE_REQUEST, and the
+``.LastOpenedMOOSLogDirectory`` hint in the working directory. The directory string
+(``path + "/" + root``) is built exactly as pLogger builds it, because it appears in the
+banners, the hint file and LOGGER_DIRECTORY.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from fleetlog.errors import StorageError
+from fleetlog.moos.alog import BinaryRef, Variant, format_banner
+from fleetlog.moos.naming import (
+    copy_file_name,
+    ctime_text,
+    hint_file_content,
+    session_dir,
+    session_root,
+    unique_root,
+)
+from fleetlog.storage.streams import OutStream, PlainStream, open_stream
+
+__all__ = ["SessionLayout", "SessionWriter", "copy_mission"]
+
+_EXT = {"none": "", "zstd": ".zst", "gzip": ".gz"}
+
+
+@dataclass(frozen=True)
+class SessionLayout:
+    """What to open: everything the configuration decides about a session's files.
+
+    Attributes:
+        file: pLogger's ``File`` (the root name's stem).
+        path: the log path, one trailing ``/`` already removed (``.`` by default).
+        timestamp: FileTimeStamp.
+        utc: UTCLogDirectories.
+        variant: the on-disk variant (banner LOGSTART precision).
+        compression: ``none``, ``zstd`` or ``gzip``.
+        sync_log: write a ``.slog``.
+        exclusion_log: write an ``.xlog``.
+        mark_data_type: the banner's DATATYPE MARKING line.
+        summary_file: the hint file's path (relative to ``cwd``).
+        mission_path: the mission file to back up as ``._moos`` (None without one).
+        helm_task_file: a pHelm TaskFile to back up as ``._hoof``.
+    """
+
+    file: str = "MOOSLog"
+    path: str = "."
+    timestamp: bool = True
+    utc: bool = False
+    variant: Variant = Variant.IVP
+    compression: str = "none"
+    sync_log: bool = False
+    exclusion_log: bool = False
+    mark_data_type: bool = False
+    summary_file: str = ".LastOpenedMOOSLogDirectory"
+    mission_path: Path | None = None
+    helm_task_file: str | None = None
+
+
+def copy_mission(source: bytes, banner: str) -> bytes:
+    """Return a ``._moos`` backup: banner then the mission copied line by line.
+
+    pLogger writes every line back followed by ``\\n`` and stops only after a failed read, so
+    a file that ends in ``\\n`` gains one extra empty line (§1.5); ``\\r`` survives.
+    """
+    lines = source.split(b"\n")
+    body = b"".join(line + b"\n" for line in lines)
+    return banner.encode("utf-8", "surrogateescape") + body
+
+
+class SessionWriter:
+    """The open files of one session.
+
+    Use :meth:`open`; then append with the ``write_*`` methods, :meth:`flush` regularly and
+    :meth:`close` at the end. Every OS failure is raised as :class:`StorageError` naming the
+    file, so the recorder can count what it lost and carry on.
+    """
+
+    def __init__(
+        self,
+        layout: SessionLayout,
+        directory: str,
+        root: str,
+        logstart: float,
+        cwd: Path,
+        fallback: bool,
+    ) -> None:
+        self.layout = layout
+        #: the directory string as pLogger builds it (``path/root``, relative if path was)
+        self.directory = directory
+        self.root = root
+        self.logstart = logstart
+        self.fallback = fallback
+        self._cwd = cwd
+        self.dir_path = (cwd / directory) if not os.path.isabs(directory) else Path(directory)
+        self.alog: OutStream
+        self.xlog: OutStream | None = None
+        self.ylog: PlainStream
+        self.slog: PlainStream | None = None
+        self.blog: PlainStream
+        self._streams: list[OutStream] = []
+        self.closed = False
+
+    # ----------------------------------------------------------------------------------------
+    @classmethod
+    def open(
+        cls,
+        layout: SessionLayout,
+        logstart: float,
+        *,
+        when: float | None = None,
+        cwd: Path | None = None,
+    ) -> SessionWriter:
+        """Create the session directory and its files, write banners, backups and the hint.
+
+        Args:
+            layout: what the configuration says to open.
+            logstart: the session's LOGSTART (seconds since the epoch).
+            when: the wall-clock time naming the directory (now by default).
+            cwd: the directory relative paths start from (the process's cwd by default).
+
+        Raises:
+            StorageError: neither the configured directory nor the ``./<root>`` fallback
+                could be created.
+        """
+        base = Path.cwd() if cwd is None else cwd
+        now = time.time() if when is None else when
+        stamp = time.gmtime(now) if layout.utc else time.localtime(now)
+        root = session_root(layout.file, stamp, layout.timestamp)
+
+        def resolve(d: str) -> Path:
+            return Path(d) if os.path.isabs(d) else base / d
+
+        if layout.timestamp:
+            # §12: never reuse (and truncate) an existing time-stamped directory.
+            root = unique_root(
+                root,
+                lambda r: resolve(session_dir(layout.path, r)).exists()
+                or resolve(session_dir(".", r)).exists(),
+            )
+        directory = session_dir(layout.path, root)
+        fallback = False
+        try:
+            _mkdir(resolve(directory))
+        except OSError as first:
+            # pLogger's fallback: the working directory (§1.2).
+            directory = session_dir(".", root)
+            fallback = True
+            try:
+                _mkdir(resolve(directory))
+            except OSError as err:
+                msg = (
+                    f"cannot create log directory {session_dir(layout.path, root)} "
+                    f"({first.strerror}) nor the fallback {directory} ({err.strerror})"
+                )
+                raise StorageError(msg) from err
+        writer = cls(layout, directory, root, logstart, base, fallback)
+        try:
+            writer._open_files(now)
+        except StorageError:
+            writer.close()
+            raise
+        return writer
+
+    def _name(self, ext: str) -> str:
+        """The file name pLogger puts in banners: ``dir/root.ext``."""
+        return f"{self.directory}/{self.root}{ext}"
+
+    def _file(self, ext: str) -> Path:
+        return self.dir_path / f"{self.root}{ext}"
+
+    def banner(self, ext: str, opened: float, *, left: bool = False) -> str:
+        """Return the banner of the file with extension ``ext``."""
+        return format_banner(
+            self._name(ext),
+            self.logstart,
+            ctime_text(time.localtime(opened)),
+            variant=self.layout.variant,
+            mark_data_type=self.layout.mark_data_type,
+            left_logstart=left,
+        )
+
+    def _open_files(self, now: float) -> None:
+        layout = self.layout
+        zext = _EXT[layout.compression]
+        self.alog = self._track(open_stream(self._file(".alog" + zext), layout.compression))
+        self.alog.write(self.banner(".alog", now))
+        if layout.compression != "none":
+            # pLogger always opens the compressed xlog; with the exclusion log off it stays
+            # an empty stream, with it on it starts with the alog's banner (§1.3).
+            self.xlog = self._track(open_stream(self._file(".xlog" + zext), layout.compression))
+            if layout.exclusion_log:
+                self.xlog.write(self.banner(".alog", now))
+        elif layout.exclusion_log:
+            self.xlog = self._track(PlainStream(self._file(".xlog")))  # no banner (§4.2)
+        self.ylog = PlainStream(self._file(".ylog"))
+        self._track(self.ylog).write(self.banner(".ylog", now))
+        if layout.sync_log:
+            # The recorder writes the slog's banner with its header (SlogTable.start).
+            self.slog = PlainStream(self._file(".slog"))
+            self._track(self.slog)
+        self.blog = PlainStream(self._file(".blog"))
+        self._track(self.blog)
+        if layout.mission_path is not None:
+            self._backup(layout.mission_path, "._moos", self.banner("._moos", now))
+        if layout.helm_task_file:
+            task = Path(layout.helm_task_file)
+            if not task.is_absolute():
+                # Relative to the working directory, as pLogger reads it; else beside the mission.
+                near = (layout.mission_path.parent if layout.mission_path else self._cwd) / task
+                task = self._cwd / task if (self._cwd / task).exists() else near
+            self._backup(task, "._hoof", None)
+        self.write_hint()
+        self.flush(now)
+
+    def _track(self, stream: OutStream) -> OutStream:
+        self._streams.append(stream)
+        return stream
+
+    def _backup(self, source: Path, ext: str, banner: str | None) -> None:
+        try:
+            data = source.read_bytes()
+        except OSError:
+            return  # pLogger skips a backup it cannot read
+        out = copy_mission(data, banner) if banner is not None else data
+        target = self._file(ext)
+        try:
+            target.write_bytes(out)
+        except OSError as err:
+            msg = f"cannot write {target}: {err.strerror}"
+            raise StorageError(msg) from err
+
+    def write_hint(self) -> None:
+        """(Re)write the ``.LastOpenedMOOSLogDirectory`` hint file.
+
+        Raises:
+            StorageError: the hint file cannot be written.
+        """
+        hint = Path(self.layout.summary_file)
+        if not hint.is_absolute():
+            hint = self._cwd / hint
+        try:
+            hint.write_text(hint_file_content(self.directory), encoding="utf-8")
+        except OSError as err:
+            msg = f"cannot write the session hint file {hint}: {err.strerror}"
+            raise StorageError(msg) from err
+
+    # ----------------------------------------------------------------------------------------
+    def write_blog(self, prefix: str, payload: bytes) -> BinaryRef:
+        """Append a binary record (alog prefix, payload, newline) and return its reference."""
+        head = prefix.encode("utf-8", "surrogateescape")
+        start = self.blog.tell()
+        self.blog.write_bytes(head + payload + b"\n")
+        return BinaryRef(f"{self.root}.blog", start + len(head), len(payload))
+
+    def copy_file(self, source: Path, requested: str) -> Path:
+        """Copy a file into the session as COPY_FILE_REQUEST does (``stem._ext``).
+
+        Raises:
+            StorageError: the file cannot be read or the copy written.
+        """
+        target = self.dir_path / copy_file_name(requested)
+        try:
+            shutil.copyfile(source, target)
+        except OSError as err:
+            msg = f"cannot copy {source} to {target}: {err.strerror}"
+            raise StorageError(msg) from err
+        return target
+
+    def flush(self, now: float) -> None:
+        """Hand every stream's buffer to the OS (compressed ones per their interval)."""
+        for stream in self._streams:
+            stream.flush(now)
+
+    def close(self) -> None:
+        """Close every stream; the first failure is raised after all were tried."""
+        if self.closed:
+            return
+        self.closed = True
+        first: StorageError | None = None
+        for stream in self._streams:
+            try:
+                stream.close()
+            except (StorageError, OSError) as err:
+                if first is None:
+                    first = err if isinstance(err, StorageError) else StorageError(str(err))
+        if first is not None:
+            raise first
+
+
+def _mkdir(path: Path) -> None:
+    """mkdir, not recursive, as pLogger does; an existing directory is reused."""
+    try:
+        path.mkdir(mode=0o755)
+    except FileExistsError:
+        if not path.is_dir():
+            raise

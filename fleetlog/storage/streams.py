@@ -1,0 +1,201 @@
+"""Append-only output streams for log files: plain, zstd and gzip, with a flush policy.
+
+Plain files are flushed to the OS by the recorder within 20 ms of a line's arrival. Compressed
+streams cannot be flushed that often without wrecking the ratio, so they close a unit at least
+once a second: a zstd frame (every complete frame is readable after a crash) or a gzip
+``Z_SYNC_FLUSH`` point (what pLogger's zipper does every 2048 bytes).
+"""
+
+from __future__ import annotations
+
+import os
+import zlib
+from pathlib import Path
+from typing import BinaryIO
+
+import zstandard
+
+from fleetlog.errors import StorageError
+
+__all__ = ["GzipStream", "OutStream", "PlainStream", "ZstdStream", "open_stream"]
+
+_BUFFER = 1 << 16
+#: the longest a compressed stream keeps data unreadable on disk
+COMPRESSED_FLUSH_INTERVAL = 1.0
+
+
+def _storage_error(action: str, path: Path, err: OSError) -> StorageError:
+    reason = err.strerror or str(err)
+    return StorageError(f"cannot {action} {path}: {reason}")
+
+
+class OutStream:
+    """A log file opened for appending text (UTF-8, surrogates escaped)."""
+
+    path: Path
+
+    def write(self, text: str) -> None:
+        """Append text."""
+        raise NotImplementedError
+
+    def flush(self, now: float) -> None:
+        """Hand what was written to the OS (compressed streams: when their interval is due)."""
+        raise NotImplementedError
+
+    def close(self) -> None:
+        """Finish the stream (compressed streams end their frame or gzip member) and close."""
+        raise NotImplementedError
+
+
+class PlainStream(OutStream):
+    """An uncompressed file."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        try:
+            self._file: BinaryIO = open(path, "wb", buffering=_BUFFER)  # noqa: SIM115
+        except OSError as err:
+            raise _storage_error("create", path, err) from err
+
+    def write(self, text: str) -> None:
+        """Append text."""
+        try:
+            self._file.write(text.encode("utf-8", "surrogateescape"))
+        except OSError as err:
+            raise _storage_error("write", self.path, err) from err
+
+    def write_bytes(self, data: bytes) -> None:
+        """Append raw bytes."""
+        try:
+            self._file.write(data)
+        except OSError as err:
+            raise _storage_error("write", self.path, err) from err
+
+    def tell(self) -> int:
+        """Return the current size of what was written."""
+        return self._file.tell()
+
+    def patch(self, offset: int, data: bytes) -> None:
+        """Overwrite bytes already written (the slog's in-place column claim)."""
+        try:
+            self._file.flush()
+            os.pwrite(self._file.fileno(), data, offset)
+        except OSError as err:
+            raise _storage_error("write", self.path, err) from err
+
+    def flush(self, now: float) -> None:
+        """Hand buffered bytes to the OS."""
+        try:
+            self._file.flush()
+        except OSError as err:
+            raise _storage_error("write", self.path, err) from err
+
+    def close(self) -> None:
+        """Flush and close."""
+        try:
+            self._file.close()
+        except OSError as err:
+            raise _storage_error("close", self.path, err) from err
+
+
+class ZstdStream(OutStream):
+    """A zstd file made of frames, one closed at least every second."""
+
+    def __init__(self, path: Path, level: int = 3) -> None:
+        self.path = path
+        try:
+            self._raw: BinaryIO = open(path, "wb")  # noqa: SIM115
+        except OSError as err:
+            raise _storage_error("create", path, err) from err
+        self._writer = zstandard.ZstdCompressor(level=level).stream_writer(
+            self._raw, closefd=False, write_return_read=True
+        )
+        self._dirty = False
+        self._last = 0.0
+
+    def write(self, text: str) -> None:
+        """Append text."""
+        try:
+            self._writer.write(text.encode("utf-8", "surrogateescape"))
+        except OSError as err:
+            raise _storage_error("write", self.path, err) from err
+        self._dirty = True
+
+    def flush(self, now: float) -> None:
+        """Close the current frame if a second has passed since the last one."""
+        if self._dirty and now - self._last >= COMPRESSED_FLUSH_INTERVAL:
+            self._end_frame()
+            self._last = now
+
+    def _end_frame(self) -> None:
+        try:
+            self._writer.flush(zstandard.FLUSH_FRAME)
+            self._raw.flush()
+        except OSError as err:
+            raise _storage_error("write", self.path, err) from err
+        self._dirty = False
+
+    def close(self) -> None:
+        """End the last frame and close."""
+        try:
+            if self._dirty:
+                self._end_frame()
+            self._writer.close()
+        finally:
+            self._raw.close()
+
+
+class GzipStream(OutStream):
+    """A single gzip member with sync-flush points, as pLogger's zipper writes."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        try:
+            self._raw: BinaryIO = open(path, "wb")  # noqa: SIM115
+        except OSError as err:
+            raise _storage_error("create", path, err) from err
+        self._zip = zlib.compressobj(6, zlib.DEFLATED, 31)
+        self._dirty = False
+        self._last = 0.0
+
+    def _out(self, data: bytes) -> None:
+        try:
+            self._raw.write(data)
+        except OSError as err:
+            raise _storage_error("write", self.path, err) from err
+
+    def write(self, text: str) -> None:
+        """Append text."""
+        self._out(self._zip.compress(text.encode("utf-8", "surrogateescape")))
+        self._dirty = True
+
+    def flush(self, now: float) -> None:
+        """Make everything so far decompressible if a second has passed."""
+        if self._dirty and now - self._last >= COMPRESSED_FLUSH_INTERVAL:
+            self._out(self._zip.flush(zlib.Z_SYNC_FLUSH))
+            try:
+                self._raw.flush()
+            except OSError as err:
+                raise _storage_error("write", self.path, err) from err
+            self._dirty = False
+            self._last = now
+
+    def close(self) -> None:
+        """Finish the gzip member and close."""
+        try:
+            self._out(self._zip.flush(zlib.Z_FINISH))
+        finally:
+            self._raw.close()
+
+
+def open_stream(path: Path, compression: str) -> OutStream:
+    """Create a stream for ``compression`` ``none`` / ``zstd`` / ``gzip``.
+
+    Raises:
+        StorageError: the file cannot be created.
+    """
+    if compression == "zstd":
+        return ZstdStream(path)
+    if compression == "gzip":
+        return GzipStream(path)
+    return PlainStream(path)
