@@ -1,0 +1,5 @@
+"""``python -m fleetlog`` runs the CLI."""
+
+from fleetlog.cli import main
+
+main()
