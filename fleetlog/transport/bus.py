@@ -6,6 +6,7 @@ delivery: the default DROP lost most samples at full speed on a 2-core machine.
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -114,7 +115,12 @@ class SampleDecoder:
                 garbled = True
             else:
                 msg = MoosMessage(
-                    name, value, meta.time, meta.source, meta.aux, meta.community,
+                    name,
+                    value,
+                    meta.time,
+                    meta.source,
+                    meta.aux,
+                    meta.community,
                     meta.original_time,
                 )
                 return Incoming(key, msg, True, garbled)
@@ -166,9 +172,7 @@ class MoosPublisher:
         self.vehicle = vehicle
         self.source = source
         self._clock = clock
-        self._congestion = (
-            zenoh.CongestionControl.DROP if drop else zenoh.CongestionControl.BLOCK
-        )
+        self._congestion = zenoh.CongestionControl.DROP if drop else zenoh.CongestionControl.BLOCK
         self._publishers: dict[tuple[str, Kind], zenoh.Publisher] = {}
         self._keys: dict[tuple[str, str], str] = {}
 
@@ -193,10 +197,8 @@ class MoosPublisher:
         publishers = list(self._publishers.values())
         self._publishers.clear()
         for pub in publishers:
-            try:
+            with contextlib.suppress(zenoh.ZError):
                 pub.undeclare()
-            except zenoh.ZError:
-                pass
 
     def publish(
         self,

@@ -15,7 +15,10 @@ __all__ = ["get_json", "get_replies", "live_vehicles"]
 
 
 def live_vehicles(
-    session: zenoh.Session, root: str, services: tuple[str, ...] = ("recorder",), timeout: float = 2.0
+    session: zenoh.Session,
+    root: str,
+    services: tuple[str, ...] = ("recorder",),
+    timeout: float = 2.0,
 ) -> dict[str, set[str]]:
     """Return the vehicles whose liveliness tokens are up: ``{vehicle: {service, ...}}``.
 
