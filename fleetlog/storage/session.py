@@ -67,10 +67,10 @@ class SessionLayout:
 
 
 def copy_mission(source: bytes, banner: str) -> bytes:
-    """Return a ``._moos`` backup: banner then the mission copied line by line.
+    r"""Return a ``._moos`` backup: banner then the mission copied line by line.
 
-    pLogger writes every line back followed by ``\\n`` and stops only after a failed read, so
-    a file that ends in ``\\n`` gains one extra empty line (§1.5); ``\\r`` survives.
+    pLogger writes every line back followed by ``\n`` and stops only after a failed read, so
+    a file that ends in ``\n`` gains one extra empty line (§1.5); ``\r`` survives.
     """
     lines = source.split(b"\n")
     body = b"".join(line + b"\n" for line in lines)
@@ -144,8 +144,10 @@ class SessionWriter:
             # §12: never reuse (and truncate) an existing time-stamped directory.
             root = unique_root(
                 root,
-                lambda r: resolve(session_dir(layout.path, r)).exists()
-                or resolve(session_dir(".", r)).exists(),
+                lambda r: (
+                    resolve(session_dir(layout.path, r)).exists()
+                    or resolve(session_dir(".", r)).exists()
+                ),
             )
         directory = session_dir(layout.path, root)
         fallback = False

@@ -8,10 +8,11 @@ once a second: a zstd frame (every complete frame is readable after a crash) or 
 
 from __future__ import annotations
 
+import contextlib
 import os
 import zlib
 from pathlib import Path
-from typing import BinaryIO
+from typing import BinaryIO, NoReturn
 
 import zstandard
 
@@ -24,9 +25,17 @@ _BUFFER = 1 << 16
 COMPRESSED_FLUSH_INTERVAL = 1.0
 
 
-def _storage_error(action: str, path: Path, err: OSError) -> StorageError:
+def _fail(action: str, path: Path, err: OSError) -> NoReturn:
+    """Raise the StorageError for an OS failure, naming the file and the reason."""
     reason = err.strerror or str(err)
-    return StorageError(f"cannot {action} {path}: {reason}")
+    msg = f"cannot {action} {path}: {reason}"
+    raise StorageError(msg) from err
+
+
+def _close_quietly(raw: BinaryIO) -> None:
+    """Close a file whose stream already failed (the first error is the one reported)."""
+    with contextlib.suppress(OSError):
+        raw.close()
 
 
 class OutStream:
@@ -55,21 +64,21 @@ class PlainStream(OutStream):
         try:
             self._file: BinaryIO = open(path, "wb", buffering=_BUFFER)  # noqa: SIM115
         except OSError as err:
-            raise _storage_error("create", path, err) from err
+            _fail("create", path, err)
 
     def write(self, text: str) -> None:
         """Append text."""
         try:
             self._file.write(text.encode("utf-8", "surrogateescape"))
         except OSError as err:
-            raise _storage_error("write", self.path, err) from err
+            _fail("write", self.path, err)
 
     def write_bytes(self, data: bytes) -> None:
         """Append raw bytes."""
         try:
             self._file.write(data)
         except OSError as err:
-            raise _storage_error("write", self.path, err) from err
+            _fail("write", self.path, err)
 
     def tell(self) -> int:
         """Return the current size of what was written."""
@@ -81,21 +90,21 @@ class PlainStream(OutStream):
             self._file.flush()
             os.pwrite(self._file.fileno(), data, offset)
         except OSError as err:
-            raise _storage_error("write", self.path, err) from err
+            _fail("write", self.path, err)
 
     def flush(self, now: float) -> None:
         """Hand buffered bytes to the OS."""
         try:
             self._file.flush()
         except OSError as err:
-            raise _storage_error("write", self.path, err) from err
+            _fail("write", self.path, err)
 
     def close(self) -> None:
         """Flush and close."""
         try:
             self._file.close()
         except OSError as err:
-            raise _storage_error("close", self.path, err) from err
+            _fail("close", self.path, err)
 
 
 class ZstdStream(OutStream):
@@ -106,7 +115,7 @@ class ZstdStream(OutStream):
         try:
             self._raw: BinaryIO = open(path, "wb")  # noqa: SIM115
         except OSError as err:
-            raise _storage_error("create", path, err) from err
+            _fail("create", path, err)
         self._writer = zstandard.ZstdCompressor(level=level).stream_writer(
             self._raw, closefd=False, write_return_read=True
         )
@@ -118,7 +127,7 @@ class ZstdStream(OutStream):
         try:
             self._writer.write(text.encode("utf-8", "surrogateescape"))
         except OSError as err:
-            raise _storage_error("write", self.path, err) from err
+            _fail("write", self.path, err)
         self._dirty = True
 
     def flush(self, now: float) -> None:
@@ -132,7 +141,7 @@ class ZstdStream(OutStream):
             self._writer.flush(zstandard.FLUSH_FRAME)
             self._raw.flush()
         except OSError as err:
-            raise _storage_error("write", self.path, err) from err
+            _fail("write", self.path, err)
         self._dirty = False
 
     def close(self) -> None:
@@ -140,9 +149,17 @@ class ZstdStream(OutStream):
         try:
             if self._dirty:
                 self._end_frame()
-            self._writer.close()
-        finally:
+            self._writer.close()  # type: ignore[no-untyped-call]  # zstandard's stub
+        except OSError as err:
+            _close_quietly(self._raw)
+            _fail("close", self.path, err)
+        except StorageError:
+            _close_quietly(self._raw)
+            raise
+        try:
             self._raw.close()
+        except OSError as err:
+            _fail("close", self.path, err)
 
 
 class GzipStream(OutStream):
@@ -153,7 +170,7 @@ class GzipStream(OutStream):
         try:
             self._raw: BinaryIO = open(path, "wb")  # noqa: SIM115
         except OSError as err:
-            raise _storage_error("create", path, err) from err
+            _fail("create", path, err)
         self._zip = zlib.compressobj(6, zlib.DEFLATED, 31)
         self._dirty = False
         self._last = 0.0
@@ -162,7 +179,7 @@ class GzipStream(OutStream):
         try:
             self._raw.write(data)
         except OSError as err:
-            raise _storage_error("write", self.path, err) from err
+            _fail("write", self.path, err)
 
     def write(self, text: str) -> None:
         """Append text."""
@@ -176,7 +193,7 @@ class GzipStream(OutStream):
             try:
                 self._raw.flush()
             except OSError as err:
-                raise _storage_error("write", self.path, err) from err
+                _fail("write", self.path, err)
             self._dirty = False
             self._last = now
 
@@ -184,8 +201,13 @@ class GzipStream(OutStream):
         """Finish the gzip member and close."""
         try:
             self._out(self._zip.flush(zlib.Z_FINISH))
-        finally:
+        except StorageError:
+            _close_quietly(self._raw)
+            raise
+        try:
             self._raw.close()
+        except OSError as err:
+            _fail("close", self.path, err)
 
 
 def open_stream(path: Path, compression: str) -> OutStream:
