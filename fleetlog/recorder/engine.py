@@ -9,6 +9,8 @@ tested with a fake clock and real files.
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -147,8 +149,12 @@ class Recorder:
         self._last_row = -1e300
         self._timers = _Timers(monitor=self.logstart, status=self.logstart)
         self.session: SessionWriter | None = None
-        self._dirty = False
         self._unflushed_since: float | None = None
+        #: samples written since the last successful flush: a buffered write that fails
+        #: later loses all of them, so all of them are counted as lost
+        self._pending = 0
+        #: the open session is the recorder's own fallback after a write error
+        self._in_fallback = False
 
     # ---------------------------------------------------------------------------------------
     # Sessions
@@ -179,10 +185,16 @@ class Recorder:
         """
         return self._open_session()
 
-    def _open_session(self) -> SessionWriter:
+    def _open_session(self, path: str | None = None) -> SessionWriter:
         now = self._clock()
-        session = SessionWriter.open(self.layout(), self.logstart, when=now, cwd=self._cwd)
+        layout = self.layout()
+        if path is not None:
+            layout = dataclasses.replace(layout, path=path)
+        session = SessionWriter.open(layout, self.logstart, when=now, cwd=self._cwd)
         self.session = session
+        self._in_fallback = path is not None
+        self._pending = 0
+        self._unflushed_since = None
         self.stats.sessions += 1
         if session.fallback:
             self.debug(
@@ -201,27 +213,36 @@ class Recorder:
         Every file is reopened (xlog and blog too), LOGSTART starts afresh, and a
         time-stamped directory is never reused.
         """
+        # The fresh LOGSTART is taken first: the Closing notice comes back after the new
+        # session opened, and a stamp before LOGSTART would count it as skewed.
+        self.logstart = self._clock()
         old = self.session
         if old is not None:
             self.debug(f"Closing : {Path(old.directory).name}")
             self._close_session()
-        self.logstart = self._clock()
+        new: SessionWriter | None
         try:
             new = self._open_session()
         except StorageError as err:
             self._storage_failed(err, lost=0)
-            return
-        self.debug(f"Now Logging to : {Path(new.directory).name}")
+            new = self._open_fallback()
+        if new is not None:
+            self.debug(f"Now Logging to : {Path(new.directory).name}")
 
     def _close_session(self) -> None:
         session = self.session
-        self.session = None
         if session is None:
             return
+        pending = self._pending
+        self._pending = 0
+        self._unflushed_since = None
         try:
             session.close()
         except StorageError as err:
-            self._storage_failed(err, lost=0)
+            # What close could not write is lost; the session is dropped either way.
+            self.session = None
+            self._storage_failed(err, lost=pending, fallback=False)
+        self.session = None
 
     def stop(self) -> None:
         """Flush and close everything (clean shutdown)."""
@@ -321,15 +342,20 @@ class Recorder:
                 stats.excluded += 1
             else:
                 stats.ignored += 1
-            if var.system and session.ylog is not None:
+            if var.system and verdict is not Verdict.IGNORE:
                 value = msg.value
                 if not isinstance(value, bytes):
                     session.ylog.write(format_ylog_line(offset, name, msg.source, value))
             if self.synclog is not None:
-                self.synclog.update(name, msg.value)
+                value = msg.value
+                # The slog holds doubles only; a binary sample shows NaN, as a string does.
+                self.synclog.update(name, "" if isinstance(value, bytes) else value)
         except StorageError as err:
-            self._storage_failed(err, lost=1)
+            lost = self._pending + 1
+            self._pending = 0
+            self._storage_failed(err, lost=lost)
         else:
+            self._pending += 1
             if self._unflushed_since is None:
                 self._unflushed_since = now
         if is_command:
@@ -387,7 +413,8 @@ class Recorder:
             self._subscribe(spec.var)
         if self.synclog is not None:
             had_free = bool(self.synclog.placeholders)
-            claim = self.synclog.claim(spec.var, self._clock() - self.logstart, nosync=not spec.sync)
+            offset = self._clock() - self.logstart
+            claim = self.synclog.claim(spec.var, offset, nosync=not spec.sync)
             if claim is not None:
                 if spec.sync and not had_free:
                     self.debug(f"no free slog column for {spec.var}: logged to the alog only")
@@ -399,26 +426,29 @@ class Recorder:
         if not source.is_absolute():
             source = self._cwd / source
         try:
-            resolved = source.resolve(strict=True)
+            # Not strict: whether a file outside the allowed directories exists is none of
+            # a Zenoh peer's business, so containment is decided before existence.
+            resolved = source.resolve()
         except (OSError, RuntimeError):
             self.debug("failed to open file for reading")
             return
-        allowed = self.copy_dirs
-        if not any(resolved.is_relative_to(d) for d in allowed):
+        if not any(resolved.is_relative_to(d) for d in self.copy_dirs):
             self.stats.refused_copies += 1
             self.debug(
                 f"refused COPY_FILE_REQUEST for {requested}: outside the directories "
                 "the recorder may copy from"
             )
             return
-        if not resolved.is_file():
+        # A trailing "/" names a directory, as open() would say; pathlib would drop it.
+        if requested.endswith("/") or not resolved.is_file():
             self.debug("failed to open file for reading")
             return
         if self.session is None:
+            self.debug("failed to open file for writing")
             return
         try:
             self.session.copy_file(resolved, requested)
-        except StorageError:
+        except FleetlogError:
             self.debug("failed to open file for writing")
 
     # ---------------------------------------------------------------------------------------
@@ -442,6 +472,9 @@ class Recorder:
         if now - self._timers.status >= STATUS_INTERVAL:
             self._timers.status = now
             self.post(self.app_name.upper() + "_STATUS", self.status_text(now))
+        # Compressed streams close a frame only when flushed a second after the last one;
+        # flushing on every tick keeps that bound when no more samples arrive.
+        self.flush()
 
     def _write_slog(self, text: str, patch: SlotPatch | None = None) -> None:
         session = self.session
@@ -453,6 +486,9 @@ class Recorder:
             session.slog.write(text)
         except StorageError as err:
             self._storage_failed(err, lost=0)
+        else:
+            if self._unflushed_since is None:
+                self._unflushed_since = self._clock()
 
     def _monitor(self, now: float) -> None:
         missing = [
@@ -498,10 +534,22 @@ class Recorder:
         try:
             session.flush(self._clock())
         except StorageError as err:
-            self._storage_failed(err, lost=0)
+            # Buffered lines fail only now: every sample since the last flush is lost.
+            lost = self._pending
+            self._pending = 0
+            self._storage_failed(err, lost=lost)
+        else:
+            self._pending = 0
 
-    def _storage_failed(self, err: FleetlogError, *, lost: int) -> None:
-        """Count, report and fall back: a full or read-only disk must not stop the recorder."""
+    def _storage_failed(self, err: FleetlogError, *, lost: int, fallback: bool = True) -> None:
+        """Count, report and fall back: a full or read-only disk must not stop the recorder.
+
+        Args:
+            err: what went wrong.
+            lost: how many received samples it cost.
+            fallback: drop the broken session and try pLogger's fallback (the working
+                directory); False when the session is being closed anyway.
+        """
         stats = self.stats
         stats.lost += lost
         stats.write_errors += 1
@@ -509,25 +557,28 @@ class Recorder:
         stats.last_error = str(err)
         if first:
             self.debug(f"write error, samples are being lost: {err}")
-        # Drop the broken session and try pLogger's fallback (the working directory).
         session = self.session
+        if session is None or not fallback:
+            return
         self.session = None
-        if session is not None:
-            try:
-                session.close()
-            except StorageError:
-                pass
-        if session is not None and not session.fallback:
-            layout = self.layout()
-            fallback = SessionLayout(**{**layout.__dict__, "path": "."})
-            try:
-                self.session = SessionWriter.open(
-                    fallback, self.logstart, when=self._clock(), cwd=self._cwd
-                )
-            except StorageError as again:
-                stats.last_error = str(again)
-                self.debug(f"fallback failed too, samples are being lost: {again}")
-                return
-            self.stats.sessions += 1
-            self.debug(f"now logging to the fallback {self.session.directory}")
-            self.post("LOGGER_DIRECTORY", self.session.directory)
+        self._pending = 0
+        self._unflushed_since = None
+        with contextlib.suppress(StorageError):
+            session.close()
+        if session.fallback or self._in_fallback:
+            # Already in the working directory: nothing left to fall back to. Samples are
+            # counted as lost until a LOGGER_RESTART opens a session again.
+            self.debug("no session is open: samples are being lost until LOGGER_RESTART")
+            return
+        self._open_fallback()
+
+    def _open_fallback(self) -> SessionWriter | None:
+        """Open a session in the working directory (pLogger's fallback) and announce it."""
+        try:
+            session = self._open_session(path=".")
+        except StorageError as err:
+            self.stats.last_error = str(err)
+            self.debug(f"fallback failed too, samples are being lost: {err}")
+            return None
+        self.debug(f"now logging to the fallback {session.directory}")
+        return session
