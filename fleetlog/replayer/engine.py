@@ -1,0 +1,562 @@
+"""The player: uPlayBack's engine, paced by an injected clock, publishing through a function.
+
+Time is log time, absolute (LOGSTART + offset), so several vehicles play on one clock. While
+playing, the position is ``anchor_log + (now - anchor_now) * rate``; every pause, rate change,
+seek or choke re-anchors, so the schedule never drifts. An entry is due when the position
+reaches its time; the player waits for that with :meth:`Clock.wait` (the real clock sleeps,
+then spins for the last millisecond), publishes it, and moves on. As fast as possible, nothing
+waits.
+
+What uPlayBack does and this keeps (MOOS_FORMAT.md §8):
+
+* each message keeps its variable and source (split into source, aux and community), its time
+  is the replay clock's wall time, and its original absolute time travels with it;
+* ``PLAYBACK_DB_TIME`` (a double, absolute log time, source ``uPlayback``) is posted first in
+  every 10 ms tick that posts something, to each vehicle that gets something in it; its value
+  is the log time at the end of the tick (as fast as possible: the entry's time);
+* PLAYBACK_CHOKE: :meth:`Player.heartbeat` takes a client's heartbeat (its own clock's time);
+  while a heartbeat has been seen and the newest one is more than 2 s old, playback does not
+  advance. A seek forgets the heartbeat, as ``GotoTime`` does.
+
+Where it differs: entries are published one by one at their own time instead of in 10 ms
+batches (within a batch uPlayBack posts newest first); values are read by the §12 reader rule
+(multi-line values, empty strings and leading spaces survive; uPlayBack drops the first two
+and keeps pLogger's terminator space); duplicates are dropped (see
+:mod:`fleetlog.replayer.schedule`).
+
+Threads: :meth:`Player.run` runs in one thread; :meth:`Player.submit`,
+:meth:`Player.heartbeat` and :meth:`Player.status` may be called from any other.
+"""
+
+from __future__ import annotations
+
+import queue
+import threading
+from collections.abc import Callable, Sequence
+from concurrent.futures import Future
+from dataclasses import dataclass, field
+
+from fleetlog.errors import ReplayError, StorageError
+from fleetlog.moos.alog import split_source
+from fleetlog.replayer.clock import Clock
+from fleetlog.replayer.control import (
+    Command,
+    Pause,
+    Resume,
+    Seek,
+    SetRate,
+    Step,
+    Stop,
+    Toggle,
+    check_rate,
+    next_rate,
+)
+from fleetlog.replayer.filters import EntryFilter, FilterSpec
+from fleetlog.replayer.inputs import ReplayInput
+from fleetlog.replayer.report import Lateness, State, Status, Summary, VehicleCounts
+from fleetlog.replayer.schedule import DEFAULT_WINDOW, Item, Schedule
+from fleetlog.wire.message import MoosMessage
+
+__all__ = ["DB_TIME_SOURCE", "MAX_CHOKE_TIME", "TICK", "PlayOptions", "Player", "Publish"]
+
+#: uPlayBack's MAX_CHOKE_TIME: how old the client's heartbeat may be before playback waits.
+MAX_CHOKE_TIME = 2.0
+#: uPlayBack's GUI timer period: at most one PLAYBACK_DB_TIME per vehicle per tick.
+TICK = 0.01
+#: The source of PLAYBACK_DB_TIME (uPlayBack's client name).
+DB_TIME_SOURCE = "uPlayback"
+_MAX_ERRORS = 5
+
+#: How the player publishes: ``publish(vehicle, message)``.
+Publish = Callable[[str, MoosMessage], None]
+
+
+@dataclass(frozen=True)
+class PlayOptions:
+    """How to play.
+
+    Attributes:
+        rate: the rate (0.1 ... 100); None plays as fast as possible.
+        start: where to start, seconds from the origin (the earliest LOGSTART); None: at
+            the first entry.
+        stop: where to stop, seconds from the origin; None: at the end.
+        paused: start paused.
+        loop: start again from ``start`` at the end.
+        filters: which entries to publish.
+        prefix: prepended to every vehicle name, to keep replayed data apart from live
+            vehicles.
+        window: each input's re-sort window, in records.
+        dedupe: drop re-delivered duplicates.
+        db_time: post PLAYBACK_DB_TIME.
+        choke_time: PLAYBACK_CHOKE's limit on the heartbeat's age, seconds.
+    """
+
+    rate: float | None = 1.0
+    start: float | None = None
+    stop: float | None = None
+    paused: bool = False
+    loop: bool = False
+    filters: FilterSpec = field(default_factory=FilterSpec)
+    prefix: str = ""
+    window: int = DEFAULT_WINDOW
+    dedupe: bool = True
+    db_time: bool = True
+    choke_time: float = MAX_CHOKE_TIME
+
+    def check(self) -> None:
+        """Validate the options.
+
+        Raises:
+            ReplayError: a rate out of range, a stop before the start, a negative window.
+        """
+        if self.rate is not None:
+            check_rate(self.rate)
+        if self.start is not None and self.stop is not None and self.stop < self.start:
+            msg = f"--to {self.stop:g} is before --from {self.start:g}"
+            raise ReplayError(msg)
+        if self.window < 0:
+            msg = f"the sort window must be 0 or more entries, not {self.window}"
+            raise ReplayError(msg)
+
+
+class Player:
+    """Replays inputs on one clock; see the module docstring.
+
+    Args:
+        inputs: the open inputs (not closed here).
+        publish: called for every message, with the vehicle to publish under.
+        clock: the clock to pace by.
+        options: how to play.
+    """
+
+    def __init__(
+        self,
+        inputs: Sequence[ReplayInput],
+        publish: Publish,
+        clock: Clock,
+        options: PlayOptions | None = None,
+    ) -> None:
+        if not inputs:
+            msg = "nothing to replay"
+            raise ReplayError(msg)
+        self.options = options or PlayOptions()
+        self.options.check()
+        self.inputs = inputs
+        self._publish = publish
+        self._clock = clock
+        self._filter = EntryFilter(self.options.filters)
+        self.vehicles = [self.options.prefix + item.vehicle for item in inputs]
+        self.origin = min(item.logstart for item in inputs)
+        opt = self.options
+        self._stop_time = float("inf") if opt.stop is None else self.origin + opt.stop
+        ends = [item.end for item in inputs]
+        known_end = None if None in ends else max(e for e in ends if e is not None)
+        self._end: float | None = known_end
+        if opt.stop is not None:
+            self._end = self._stop_time if known_end is None else min(known_end, self._stop_time)
+        self._begin = self.origin if opt.start is None else self.origin + opt.start
+        self._commands: queue.SimpleQueue[tuple[Command, Future[Status]]] = queue.SimpleQueue()
+        self._lock = threading.Lock()
+        self._state = State.PAUSED if opt.paused else State.PLAYING
+        self._rate = opt.rate
+        self._anchor_log = self._begin
+        self._anchor_now = 0.0
+        self._frozen = self._begin
+        self._last = self._begin  # the newest time published (the position, fast)
+        self._heartbeat: float | None = None
+        self._schedule: Schedule | None = None
+        self._next: Item | None = None
+        self._pass_items = 0
+        self._consumed = -float("inf")  # the newest time the pass went past
+        self._slot = -1
+        self._slot_vehicles: set[str] = set()
+        self._sources: dict[str, tuple[str, str, str]] = {}
+        self._counts = {vehicle: VehicleCounts() for vehicle in self.vehicles}
+        self._timing = Lateness()
+        self._errors: list[str] = []
+        self._loops = 0
+        self._dropped = [0, 0, 0]  # duplicates, before LOGSTART, late: of closed passes
+
+    # -- other threads
+
+    def submit(self, command: Command) -> Future[Status]:
+        """Queue a command; the future gets the status after it was applied.
+
+        The future fails with :class:`ReplayError` when the command cannot apply, or when
+        the replay has ended.
+        """
+        future: Future[Status] = Future()
+        if self._state in (State.FINISHED, State.STOPPED):
+            future.set_exception(ReplayError("the replay has ended"))
+            return future
+        self._commands.put((command, future))
+        self._clock.wake()
+        return future
+
+    def heartbeat(self, client_time: float) -> None:
+        """Take a PLAYBACK_CHOKE heartbeat: the client's clock time when it sent it."""
+        self._heartbeat = client_time
+        self._clock.wake()
+
+    def stop(self) -> None:
+        """End the replay soon (from any thread, e.g. a signal handler)."""
+        self.submit(Stop())
+
+    def status(self) -> Status:
+        """Return a snapshot of the player (from any thread)."""
+        with self._lock:
+            state = self._state
+            position = self._position_locked()
+            rate = self._rate
+        counts = list(self._counts.values())
+        end = None if self._end is None else self._end - self.origin
+        return Status(
+            state,
+            position,
+            position - self.origin,
+            self._begin - self.origin,
+            end,
+            rate,
+            sum(c.published for c in counts),
+            sum(c.filtered for c in counts),
+            self._loops,
+            tuple(dict.fromkeys(self.vehicles)),
+        )
+
+    # -- position
+
+    def _position_locked(self) -> float:
+        if self._state is State.PLAYING and self._rate is not None:
+            position = self._anchor_log + (self._clock.now() - self._anchor_now) * self._rate
+            if self._next is not None and not self._next.late:
+                # Not past the entry it waits for: a choke or a slow publish holds it there.
+                position = min(position, max(self._next.time, self._last))
+            return min(position, self._stop_time)
+        if self._state is State.PLAYING:
+            return self._last
+        return self._frozen
+
+    def _set_anchor(self, position: float) -> None:
+        self._anchor_log = position
+        self._anchor_now = self._clock.now()
+        self._frozen = position
+        self._last = position
+
+    def _due(self, when: float) -> float:
+        assert self._rate is not None
+        return self._anchor_now + (when - self._anchor_log) / self._rate
+
+    # -- schedule
+
+    def _open(self, at: float) -> None:
+        """Start a new pass and skip to ``at`` (without publishing)."""
+        self._close_schedule()
+        self._schedule = Schedule(
+            self.inputs, window=self.options.window, dedupe=self.options.dedupe
+        )
+        self._next = next(self._schedule, None)
+        self._consumed = -float("inf")
+        self._skip_to(at)
+        self._pass_items = 0  # what the pass plays, not what it skipped
+
+    def _skip_to(self, at: float) -> None:
+        while self._next is not None and self._next.time < at:
+            self._advance()
+
+    def _advance(self) -> None:
+        assert self._schedule is not None
+        if self._next is not None and self._next.time > self._consumed:
+            self._consumed = self._next.time
+        self._next = next(self._schedule, None)
+        self._pass_items += 1
+
+    def _close_schedule(self) -> None:
+        schedule = self._schedule
+        if schedule is not None:
+            self._dropped[0] += schedule.duplicates
+            self._dropped[1] += schedule.before_logstart
+            self._dropped[2] += schedule.late
+            schedule.close()
+            self._schedule = None
+
+    # -- the loop
+
+    def run(self) -> Summary:
+        """Play to the end (or until stopped) and return the summary.
+
+        Raises:
+            StorageError: an input cannot be read.
+            FormatError: (``errors="raise"`` readers) an input has a malformed line; the
+                message names the file and line.
+        """
+        started = self._clock.now()
+        try:
+            self._open(self._begin)
+            if self.options.start is None and self._next is not None:
+                self._begin = self._next.time
+            with self._lock:
+                self._set_anchor(self._begin)
+            self._play()
+        finally:
+            self._close_schedule()
+            self._fail_pending()
+        return self._summary(self._clock.now() - started)
+
+    def _play(self) -> None:
+        clock = self._clock
+        while True:
+            self._apply_commands()
+            state = self._state
+            if state is State.STOPPED:
+                return
+            if state is State.PAUSED:
+                clock.wait(None)
+                continue
+            item = self._next
+            if item is None or item.time > self._stop_time:
+                if self._wrap():
+                    continue
+                with self._lock:
+                    self._frozen = min(max(self._last, self._begin), self._stop_time)
+                    if self._end is None and item is None:
+                        self._end = self._frozen
+                    self._state = State.FINISHED
+                return
+            if not self._filter.allows(item.entry.key, item.entry.source):
+                self._counts[self.vehicles[item.origin]].filtered += 1
+                self._advance()
+                continue
+            if self._choked():
+                clock.wait(None)  # only a fresh heartbeat, a seek or a command ends it
+                continue
+            due = None
+            if self._rate is not None and not item.late:
+                due = self._due(item.time)
+                now = clock.now()
+                if now < due:
+                    # Wake when the heartbeat turns stale too, so a choke stops the
+                    # position where uPlayBack's tick would have, not at the next entry.
+                    deadline = min(due, self._choke_deadline(now))
+                    if clock.wait(deadline) or deadline < due:
+                        continue  # apply the commands (or the choke), then look again
+            self._emit(item, due)
+
+    def _wrap(self) -> bool:
+        """At the end: start the next loop if looping (and the last pass played anything)."""
+        if not self.options.loop or self._pass_items == 0:
+            return False
+        self._loops += 1
+        self._open(self._begin)
+        with self._lock:
+            self._set_anchor(self._begin)
+        self._slot = -1
+        return True
+
+    def _choke_deadline(self, now: float) -> float:
+        heartbeat = self._heartbeat
+        if heartbeat is None:
+            return float("inf")
+        # Just past the limit: the choke starts once the heartbeat is *more* than it old.
+        return now + (heartbeat + self.options.choke_time - self._clock.wall()) + 1e-6
+
+    def _choked(self) -> bool:
+        heartbeat = self._heartbeat
+        choked = heartbeat is not None and self._clock.wall() - heartbeat > self.options.choke_time
+        with self._lock:
+            if choked and self._state is State.PLAYING:
+                self._frozen = self._position_locked()
+                self._state = State.WAITING
+            elif not choked and self._state is State.WAITING:
+                self._state = State.PLAYING
+                self._set_anchor(self._frozen)
+        return choked
+
+    def _split(self, source: str) -> tuple[str, str, str]:
+        parts = self._sources.get(source)
+        if parts is None:
+            parts = split_source(source)
+            if len(self._sources) > 65536:
+                self._sources.clear()
+            self._sources[source] = parts
+        return parts
+
+    def _emit(self, item: Item, due: float | None) -> None:
+        """Publish one entry (after PLAYBACK_DB_TIME if it opens a tick) and move on."""
+        assert self._schedule is not None
+        vehicle = self.vehicles[item.origin]
+        entry = item.entry
+        try:
+            value = self._schedule.payload(item)
+        except StorageError as err:
+            self._counts[vehicle].unplayable += 1
+            if len(self._errors) < _MAX_ERRORS:
+                self._errors.append(str(err))
+            self._advance()
+            return
+        clock = self._clock
+        wall = clock.wall()
+        if self.options.db_time:
+            self._db_time(vehicle, item, wall)
+        source, aux, community = self._split(entry.source)
+        self._publish(
+            vehicle, MoosMessage(entry.key, value, wall, source, aux, community, item.time)
+        )
+        if due is not None:
+            self._timing.add(clock.now() - due)
+        self._counts[vehicle].published += 1
+        if item.time > self._last:
+            self._last = item.time
+        self._advance()
+
+    def _db_time(self, vehicle: str, item: Item, wall: float) -> None:
+        now = self._clock.now()
+        slot = int(now / TICK)
+        if slot != self._slot:
+            self._slot = slot
+            self._slot_vehicles.clear()
+        if vehicle in self._slot_vehicles:
+            return
+        self._slot_vehicles.add(vehicle)
+        value = item.time
+        if self._rate is not None and self._state is State.PLAYING:
+            tick_end = (slot + 1) * TICK
+            value = max(value, self._anchor_log + (tick_end - self._anchor_now) * self._rate)
+        value = min(value, max(self._stop_time, item.time))
+        self._publish(vehicle, MoosMessage("PLAYBACK_DB_TIME", value, wall, DB_TIME_SOURCE))
+
+    # -- commands
+
+    def _apply_commands(self) -> None:
+        while True:
+            try:
+                command, future = self._commands.get_nowait()
+            except queue.Empty:
+                return
+            if not future.set_running_or_notify_cancel():
+                continue
+            try:
+                self._apply(command)
+            except ReplayError as err:
+                future.set_exception(err)
+            else:
+                future.set_result(self.status())
+
+    def _fail_pending(self) -> None:
+        while True:
+            try:
+                _, future = self._commands.get_nowait()
+            except queue.Empty:
+                return
+            if future.set_running_or_notify_cancel():
+                future.set_exception(ReplayError("the replay has ended"))
+
+    def _pause(self) -> None:
+        with self._lock:
+            if self._state in (State.PLAYING, State.WAITING):
+                self._frozen = self._position_locked()
+                self._state = State.PAUSED
+
+    def _resume(self) -> None:
+        with self._lock:
+            if self._state is State.PAUSED:
+                self._state = State.PLAYING
+                self._set_anchor(self._frozen)
+        self._slot = -1
+
+    def _apply(self, command: Command) -> None:
+        if isinstance(command, Pause):
+            self._pause()
+        elif isinstance(command, Resume):
+            self._resume()
+        elif isinstance(command, Toggle):
+            if self._state is State.PAUSED:
+                self._resume()
+            else:
+                self._pause()
+        elif isinstance(command, Stop):
+            with self._lock:
+                self._frozen = self._position_locked()
+                self._state = State.STOPPED
+        elif isinstance(command, SetRate):
+            self._set_rate(command)
+        elif isinstance(command, Seek):
+            self._seek(command)
+        elif isinstance(command, Step):
+            self._step(command)
+
+    def _set_rate(self, command: SetRate) -> None:
+        if command.steps:
+            rate = next_rate(self._rate, command.steps)
+        else:
+            rate = None if command.rate is None else check_rate(command.rate)
+        with self._lock:
+            position = self._position_locked()
+            self._rate = rate
+            self._set_anchor(position)
+
+    def _seek(self, command: Seek) -> None:
+        with self._lock:
+            here = self._position_locked()
+        target = self.origin + command.to if command.to is not None else here + (command.by or 0.0)
+        upper = self._stop_time if self._end is None else self._end
+        target = min(max(target, self._begin), upper)
+        if target <= self._consumed:
+            # The pass went past entries at or after the target: start a new one.
+            self._open(target)
+        else:
+            self._skip_to(target)
+        self._heartbeat = None  # GotoTime resets the choke state (§8.4)
+        self._slot = -1
+        with self._lock:
+            if self._state is State.WAITING:
+                self._state = State.PLAYING
+            self._set_anchor(target)
+
+    def _step(self, command: Step) -> None:
+        self._pause()
+        with self._lock:
+            position = self._frozen
+        if command.seconds is not None:
+            target = min(position + command.seconds, self._stop_time)
+            while (item := self._next) is not None and item.time <= target:
+                self._step_one(item)
+            position = max(target, self._last)
+        else:
+            left = command.entries
+            while left and (item := self._next) is not None and item.time <= self._stop_time:
+                left -= self._step_one(item)
+            position = max(position, self._last)
+        with self._lock:
+            self._frozen = position
+            self._last = position
+
+    def _step_one(self, item: Item) -> int:
+        """Publish (or filter out) one entry while stepping; return 1 if it was published."""
+        if not self._filter.allows(item.entry.key, item.entry.source):
+            self._counts[self.vehicles[item.origin]].filtered += 1
+            self._advance()
+            return 0
+        before = self._counts[self.vehicles[item.origin]].published
+        self._emit(item, None)
+        return self._counts[self.vehicles[item.origin]].published - before
+
+    # -- the end
+
+    def _summary(self, elapsed: float) -> Summary:
+        duplicates, before, late = self._dropped
+        state = self._state if self._state is State.FINISHED else State.STOPPED
+        return Summary(
+            state,
+            dict(self._counts),
+            duplicates,
+            before,
+            late,
+            self._loops,
+            elapsed,
+            self._timing,
+            list(self._errors),
+            [
+                (item.name, self.vehicles[i], item.vehicle_from, item.reader.truncated)
+                for i, item in enumerate(self.inputs)
+            ],
+        )

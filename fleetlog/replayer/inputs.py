@@ -1,0 +1,281 @@
+"""What the player replays: alogs and session directories, each with the vehicle it belongs to.
+
+An input is an alog (``.alog``, ``.alog.gz``, ``.alog.zst``) or a session directory (its alog
+is found by :func:`fleetlog.storage.readers.find_alog`). Its vehicle, under which its entries
+are published, is decided in this order:
+
+1. ``--as V`` (the caller's override);
+2. the community of the MOOSDB that logged it: the source ``MOOSDB_<V>`` of a ``DB_TIME``
+   line among the first entries (every MOOSDB posts DB_TIME about once a second and names
+   itself ``MOOSDB_<Community>``);
+3. the ``Community`` of the mission copy ``<root>._moos`` beside the alog.
+
+A session recorded by ``fleetlog record`` without a mission has neither, so it needs ``--as``.
+Nothing here loads a whole file: the vehicle scan reads a bounded number of entries and the
+end time of a plain alog comes from its last 64 KiB.
+"""
+
+from __future__ import annotations
+
+import io
+import itertools
+import os
+import re
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import cast
+
+from fleetlog.errors import FleetlogError, FormatError, ReplayError, StorageError
+from fleetlog.moos.alog import BANNER_RULE, iter_entries
+from fleetlog.moos.mission import parse_mission
+from fleetlog.storage.readers import AlogReader, Errors, find_alog, open_text
+
+__all__ = [
+    "RemoteSpec",
+    "ReplayInput",
+    "alog_root",
+    "detect_vehicle",
+    "open_input",
+    "open_inputs",
+    "parse_remote",
+]
+
+#: Entries scanned for a ``DB_TIME`` line from ``MOOSDB_<V>`` when looking for the vehicle.
+VEHICLE_SCAN_ENTRIES = 5000
+#: Bytes read from the end of a plain alog to find its last entry time.
+TAIL_BYTES = 64 * 1024
+_ALOG_SUFFIXES = (".alog.zst", ".alog.gz", ".alog")
+_REMOTE_RE = re.compile(r"(?P<vehicle>[^/:]+):(?P<session>[^/]+)")
+
+
+@dataclass(frozen=True, slots=True)
+class RemoteSpec:
+    """A remote input, ``V:latest`` or ``V:SESSION``, served by a vehicle's query service."""
+
+    vehicle: str
+    session: str
+
+
+def parse_remote(spec: str) -> RemoteSpec | None:
+    """Return the remote session ``spec`` names, or None when it is a local path.
+
+    A spec is remote when it has the shape ``VEHICLE:SESSION`` (no ``/``) and no file or
+    directory of that name exists.
+    """
+    if os.path.exists(spec):
+        return None
+    match = _REMOTE_RE.fullmatch(spec)
+    if match is None:
+        return None
+    return RemoteSpec(match.group("vehicle"), match.group("session"))
+
+
+def alog_root(alog: Path) -> str:
+    """Return the session root of an alog's name (``root`` of ``root.alog.gz``)."""
+    name = alog.name
+    for suffix in _ALOG_SUFFIXES:
+        if name.endswith(suffix):
+            return name[: -len(suffix)]
+    return alog.stem
+
+
+@dataclass
+class ReplayInput:
+    """One alog to replay, open, with the vehicle its entries are published under.
+
+    Attributes:
+        name: the input as the user gave it (for messages and the summary).
+        reader: the open reader (one pass per replay pass; binary values are read from it).
+        vehicle: the vehicle the entries belong to (before any ``--prefix``).
+        vehicle_from: how the vehicle was found: ``--as``, ``DB_TIME`` or ``._moos``.
+        logstart: the banner's LOGSTART (absolute time of offset 0).
+        end: the absolute time of the last entry, when it can be known cheaply (a plain
+            alog); None for compressed alogs.
+    """
+
+    name: str
+    reader: AlogReader
+    vehicle: str
+    vehicle_from: str
+    logstart: float
+    end: float | None
+
+    @property
+    def path(self) -> Path:
+        """The alog file."""
+        return self.reader.path
+
+    def close(self) -> None:
+        """Close the reader."""
+        self.reader.close()
+
+
+def _moos_community(alog: Path) -> str | None:
+    """Return the ``Community`` of the ``._moos`` mission copy beside an alog, if any."""
+    moos = alog.with_name(alog_root(alog) + "._moos")
+    if not moos.is_file():
+        return None
+    try:
+        with open_text(moos) as text:
+            # A mission file, not a log: bounded anyway, in case the name lies.
+            lines = list(itertools.islice(text, 100_000))
+    except StorageError:
+        return None
+    if lines and lines[0].rstrip("\n") == BANNER_RULE:
+        # pLogger's banner comes first (§1.5): drop it, up to its closing rule.
+        for index, line in enumerate(lines[1:], start=1):
+            if line.rstrip("\n") == BANNER_RULE:
+                lines = lines[index + 1 :]
+                break
+    try:
+        return parse_mission("".join(lines), str(moos)).community
+    except FormatError:
+        return None
+
+
+def _db_time_community(reader: AlogReader) -> str | None:
+    """Return ``V`` of the first ``DB_TIME`` posted by ``MOOSDB_<V>`` among the first entries."""
+    entries = reader.entries()
+    try:
+        for entry in itertools.islice(entries, VEHICLE_SCAN_ENTRIES):
+            if entry.key == "DB_TIME" and entry.source.startswith("MOOSDB_"):
+                community = entry.source[len("MOOSDB_") :]
+                if community:
+                    return community
+    except FleetlogError:
+        return None  # a bad line later in the file is for the replay pass to report
+    finally:
+        close = getattr(entries, "close", None)
+        if close is not None:
+            close()
+    return None
+
+
+def detect_vehicle(reader: AlogReader) -> tuple[str, str] | None:
+    """Return ``(vehicle, how)`` for an alog from its DB_TIME lines or its ``._moos``."""
+    community = _db_time_community(reader)
+    if community is not None:
+        return community, "DB_TIME"
+    community = _moos_community(reader.path)
+    if community is not None:
+        return community, "._moos"
+    return None
+
+
+def _tail_end(reader: AlogReader) -> float | None:
+    """Return LOGSTART + the largest offset among the last 64 KiB of a plain alog."""
+    logstart = reader.logstart
+    if logstart is None:
+        return None
+    try:
+        with open_text(reader.path) as text:
+            if text.compression:
+                return None
+            raw = cast("io.BufferedIOBase", text.buffer)
+            size = raw.seek(0, os.SEEK_END)
+            start = max(0, size - TAIL_BYTES)
+            raw.seek(start)
+            data = raw.read()
+    except (StorageError, OSError):
+        return None
+    if start > 0:
+        cut = data.find(b"\n")
+        data = data[cut + 1 :] if cut >= 0 else b""
+    lines = data.decode("utf-8", "surrogateescape").splitlines(keepends=True)
+    offsets = [entry.offset for entry in iter_entries(lines)]
+    return logstart + max(offsets) if offsets else None
+
+
+def _alog_of(spec: str) -> Path:
+    path = Path(spec)
+    if path.is_dir():
+        return find_alog(path)
+    if path.is_file():
+        return path
+    if parse_remote(spec) is not None:
+        msg = f"{spec}: remote inputs need the query service, which this fleetlog does not have"
+        raise ReplayError(msg)
+    msg = f"{spec}: no such file or session directory"
+    raise ReplayError(msg)
+
+
+def open_input(
+    spec: str | os.PathLike[str], vehicle: str | None = None, *, errors: Errors = "raise"
+) -> ReplayInput:
+    """Open one input: check its banner, find its vehicle and, if cheap, its end time.
+
+    Args:
+        spec: an alog file or a session directory.
+        vehicle: the vehicle to publish as (``--as``); found from the log when None.
+        errors: the reader's error policy for bad lines (``"raise"`` or ``"skip"``).
+
+    Raises:
+        ReplayError: the input does not exist, or its vehicle cannot be found.
+        StorageError: the file cannot be read, or has no usable LOGSTART.
+        FormatError: the banner is garbled (the message names the file and line).
+    """
+    name = os.fspath(spec)
+    reader = AlogReader(_alog_of(name), errors=errors)
+    try:
+        logstart, found = _identify(reader, name, vehicle)
+        return ReplayInput(name, reader, found[0], found[1], logstart, _tail_end(reader))
+    except BaseException:
+        reader.close()
+        raise
+
+
+def _identify(reader: AlogReader, name: str, vehicle: str | None) -> tuple[float, tuple[str, str]]:
+    """Return the input's LOGSTART and ``(vehicle, how it was found)``."""
+    logstart = reader.logstart
+    if logstart is None:
+        msg = f"{reader.path}: no usable banner, so its entries have no absolute time"
+        raise StorageError(msg)
+    found = (vehicle, "--as") if vehicle is not None else detect_vehicle(reader)
+    if found is None:
+        msg = (
+            f"{name}: cannot tell which vehicle this log is from (no DB_TIME from"
+            " MOOSDB_<V>, no Community in a ._moos); name it with --as V"
+        )
+        raise ReplayError(msg)
+    return logstart, found
+
+
+def open_inputs(
+    specs: Sequence[str | os.PathLike[str]],
+    vehicles: Sequence[str] = (),
+    *,
+    errors: Errors = "raise",
+) -> list[ReplayInput]:
+    """Open several inputs; ``vehicles`` is empty, one name for all, or one per input.
+
+    Raises:
+        ReplayError: no inputs, a wrong number of vehicle names, or as :func:`open_input`.
+        StorageError: as :func:`open_input`.
+        FormatError: as :func:`open_input`.
+    """
+    if not specs:
+        msg = "nothing to replay: give at least one alog or session directory"
+        raise ReplayError(msg)
+    if len(vehicles) not in (0, 1, len(specs)):
+        msg = (
+            f"--as was given {len(vehicles)} times for {len(specs)} inputs: give it once (for"
+            " every input) or once per input"
+        )
+        raise ReplayError(msg)
+    names: list[str | None]
+    if not vehicles:
+        names = [None] * len(specs)
+    elif len(vehicles) == 1:
+        names = [vehicles[0]] * len(specs)
+    else:
+        names = list(vehicles)
+    opened: list[ReplayInput] = []
+    try:
+        for spec, vehicle in zip(specs, names, strict=True):
+            opened.append(open_input(spec, vehicle, errors=errors))
+    except BaseException:
+        for item in opened:
+            item.close()
+        raise
+    return opened

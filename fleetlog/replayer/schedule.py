@@ -1,0 +1,172 @@
+"""One pass over the inputs in absolute-time order: what the player publishes, and when.
+
+An alog is not time-sorted (MOOS_FORMAT.md §2.2): pLogger sorts each mail batch, writes
+batches in arrival order, and the MOOSDB re-delivers current values, with their original
+time stamps, whenever pLogger re-registers. uPlayBack sorts its whole index (§8.1); a
+streaming player cannot, so each input goes through a bounded re-sort window
+(:class:`fleetlog.storage.readers.SortedWindow`) and the inputs are merged by absolute time
+(LOGSTART + offset) onto one clock. What the schedule does with the rest, and counts:
+
+* **before LOGSTART**: entries with a negative offset (values the MOOSDB re-delivered from
+  before pLogger started) are dropped, as uPlayBack drops them (its index keeps only lines
+  that start with a digit, §8.1);
+* **duplicates**: an entry equal to one already played (same vehicle, time, variable, source
+  and value text; for a binary value, the same bytes, since a re-delivery gets a new blog
+  record) is a re-delivery, not a second publication, and is dropped. A bounded
+  memory of recent entries catches them whether the window put them next to the original or
+  they came too late for it. ``dedupe=False`` plays them, as uPlayBack does;
+* **late**: an entry displaced by more than the window comes after later ones. It is played
+  at once (its time has passed) rather than lost, and counted.
+"""
+
+from __future__ import annotations
+
+from collections import deque
+from collections.abc import Generator, Iterator, Sequence
+from typing import NamedTuple
+
+from fleetlog.errors import StorageError
+from fleetlog.moos.alog import BinaryRef, Entry
+from fleetlog.replayer.inputs import ReplayInput
+from fleetlog.storage.readers import Record, merge_records
+
+__all__ = ["DEDUPE_MEMORY", "DEFAULT_WINDOW", "Item", "Schedule"]
+
+#: Records each input's re-sort window holds back (alogsort holds 1000).
+DEFAULT_WINDOW = 10_000
+#: How many recent entries the duplicate check remembers.
+DEDUPE_MEMORY = 65_536
+
+
+class Item(NamedTuple):
+    """One entry on the replay schedule.
+
+    Attributes:
+        time: absolute log time (LOGSTART + offset).
+        origin: the index of the input it came from.
+        entry: the entry as read.
+        late: True when a later entry was already scheduled (out of order by more than the
+            re-sort window).
+        payload: a binary value's bytes, once read from the blog (the duplicate check
+            reads them).
+    """
+
+    time: float
+    origin: int
+    entry: Entry
+    late: bool
+    payload: bytes | None = None
+
+
+class Schedule:
+    """Iterates the inputs' entries in time order, once; see the module docstring.
+
+    Args:
+        inputs: the open inputs (a new pass is started on each).
+        window: each input's re-sort window, in records.
+        dedupe: drop re-delivered duplicates.
+        memory: how many recent entries the duplicate check remembers.
+
+    Attributes:
+        before_logstart: entries dropped for a negative offset.
+        duplicates: entries dropped as duplicates.
+        late: entries scheduled after a later one.
+    """
+
+    def __init__(
+        self,
+        inputs: Sequence[ReplayInput],
+        *,
+        window: int = DEFAULT_WINDOW,
+        dedupe: bool = True,
+        memory: int = DEDUPE_MEMORY,
+    ) -> None:
+        self.inputs = inputs
+        self.before_logstart = 0
+        self.duplicates = 0
+        self.late = 0
+        self._dedupe = dedupe
+        self._memory = memory
+        self._seen: set[int] = set()
+        self._order: deque[int] = deque()
+        self._passes = [self._records(item) for item in inputs]
+        self._merge = merge_records(self._passes, window=window)
+        self._run = self._items()
+
+    def _records(self, source: ReplayInput) -> Generator[Record, None, None]:
+        logstart = source.logstart
+        entries = source.reader.entries()
+        try:
+            for entry in entries:
+                if entry.offset < 0:
+                    self.before_logstart += 1
+                    continue
+                yield Record(logstart + entry.offset, entry)
+        finally:
+            # Closing the pass closes its file now, not when the garbage collector runs.
+            close = getattr(entries, "close", None)
+            if close is not None:
+                close()
+
+    def _with_payload(self, item: Item) -> Item:
+        try:
+            return item._replace(payload=self.inputs[item.origin].reader.read_binary(item.entry))
+        except StorageError:
+            return item  # publishing reports it, with the reason
+
+    def _is_duplicate(self, item: Item) -> bool:
+        entry = item.entry
+        # A binary re-delivery gets a new blog record, so its reference differs: compare
+        # the bytes instead.
+        value = entry.text if item.payload is None else item.payload
+        sig = hash((self.inputs[item.origin].vehicle, item.time, entry.key, entry.source, value))
+        if sig in self._seen:
+            return True
+        self._seen.add(sig)
+        self._order.append(sig)
+        if len(self._order) > self._memory:
+            self._seen.discard(self._order.popleft())
+        return False
+
+    def _items(self) -> Generator[Item, None, None]:
+        newest = -float("inf")
+        for time, origin, entry in self._merge:
+            late = time < newest
+            item = Item(time, origin, entry, late)
+            if self._dedupe:
+                if isinstance(entry.value, BinaryRef):
+                    item = self._with_payload(item)
+                if self._is_duplicate(item):
+                    self.duplicates += 1
+                    continue
+            if late:
+                self.late += 1
+            else:
+                newest = time
+            yield item
+
+    def __iter__(self) -> Iterator[Item]:
+        return self._run
+
+    def __next__(self) -> Item:
+        return next(self._run)
+
+    def payload(self, item: Item) -> float | str | bytes:
+        """Return the value to publish: the double, the string, or the bytes from the blog.
+
+        Raises:
+            StorageError: a binary value's bytes cannot be read (the message names the log
+                line, the blog and the offset).
+        """
+        value = item.entry.value
+        if isinstance(value, BinaryRef):
+            if item.payload is not None:
+                return item.payload
+            return self.inputs[item.origin].reader.read_binary(item.entry)
+        return value
+
+    def close(self) -> None:
+        """Stop the pass: close the files it holds open."""
+        self._run.close()
+        for records in self._passes:
+            records.close()
