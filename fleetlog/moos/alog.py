@@ -230,10 +230,18 @@ class LineFormatter:
     """Formats entry lines fast, caching the padded key/source prefix per pair.
 
     The recorder formats tens of thousands of lines a second; the key and source columns
-    repeat, so their padded text is built once.
+    repeat, so their padded text is built once, and a double's whole line is one ``%``
+    operation (``%-12.Nf`` is ``format_double``'s text for every value but NaN).
     """
 
-    __slots__ = ("_prefixes", "_time_fmt", "double_precision", "mark_data_type", "variant")
+    __slots__ = (
+        "_double_line",
+        "_double_precision",
+        "_mark_data_type",
+        "_prefixes",
+        "_time_fmt",
+        "variant",
+    )
 
     def __init__(
         self,
@@ -243,10 +251,36 @@ class LineFormatter:
         mark_data_type: bool = False,
     ) -> None:
         self.variant = variant
-        self.double_precision = double_precision
-        self.mark_data_type = mark_data_type
+        self._double_precision = double_precision
+        self._mark_data_type = mark_data_type
         self._time_fmt = f"%-15.{variant.time_decimals}f "
         self._prefixes: dict[tuple[str, str], str] = {}
+        self._double_line = ""
+        self._compile()
+
+    def _compile(self) -> None:
+        marker = "D:" if self._mark_data_type else ""
+        self._double_line = f"{self._time_fmt}%s{marker}%-12.{self._double_precision}f \n"
+
+    @property
+    def double_precision(self) -> int:
+        """Decimals of double values (DoublePrecision)."""
+        return self._double_precision
+
+    @double_precision.setter
+    def double_precision(self, value: int) -> None:
+        self._double_precision = value
+        self._compile()
+
+    @property
+    def mark_data_type(self) -> bool:
+        """Put pLogger's ``D:``/``S:`` markers in front of values (MarkDataType)."""
+        return self._mark_data_type
+
+    @mark_data_type.setter
+    def mark_data_type(self, value: bool) -> None:
+        self._mark_data_type = value
+        self._compile()
 
     def _prefix(self, key: str, source: str) -> str:
         pair = (key, source)
@@ -260,14 +294,17 @@ class LineFormatter:
 
     def double(self, offset: float, key: str, source: str, value: float) -> str:
         """Return the line for a double value."""
-        text = format_double(value, self.double_precision)
-        if self.mark_data_type:
+        prefix = self._prefixes.get((key, source)) or self._prefix(key, source)
+        if value == value:  # not NaN, whose sign only format_double mirrors
+            return self._double_line % (offset, prefix, value)
+        text = format_double(value, self._double_precision)
+        if self._mark_data_type:
             text = "D:" + text
-        return self._time_fmt % offset + self._prefix(key, source) + text + " \n"
+        return self._time_fmt % offset + prefix + text + " \n"
 
     def string(self, offset: float, key: str, source: str, value: str) -> str:
         """Return the line(s) for a string value, written verbatim."""
-        if self.mark_data_type:
+        if self._mark_data_type:
             value = "S:" + value
         return self._time_fmt % offset + self._prefix(key, source) + value + " \n"
 
