@@ -10,6 +10,7 @@ must be drained for that put to complete.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import queue
 import threading
@@ -22,7 +23,7 @@ import zenoh
 
 from fleetlog.errors import FleetlogError
 from fleetlog.moos.mission import LoggerConfig
-from fleetlog.moos.patterns import name_to_chunk, reduce_chunks
+from fleetlog.moos.patterns import chunk_includes, name_to_chunk, reduce_chunks
 from fleetlog.recorder.engine import Recorder
 from fleetlog.transport.bus import MoosPublisher, SampleDecoder, declare_fifo_subscriber
 from fleetlog.transport.session import SessionOptions, open_session, translate_zerror
@@ -89,9 +90,7 @@ class RecorderService:
         self._subscribers: list[zenoh.Subscriber[zenoh.handlers.Handler[zenoh.Sample]]] = []
         self._chunks: set[str] = set()
         self._session: zenoh.Session | None = None
-        self._var_prefix = (
-            f"{options.root}/{name_to_chunk(options.vehicle)}/var/"
-        )
+        self._var_prefix = f"{options.root}/{name_to_chunk(options.vehicle)}/var/"
 
     def stop(self) -> None:
         """Ask the service to finish (safe from a signal handler or another thread)."""
@@ -100,7 +99,9 @@ class RecorderService:
     # ---------------------------------------------------------------------------------------
     def _subscribe_chunk(self, chunk: str) -> None:
         assert self._session is not None
-        if chunk in self._chunks or "*" in self._chunks:
+        if any(chunk_includes(have, chunk) for have in self._chunks):
+            # An overlapping second subscriber would deliver every sample twice (a LOG_REQUEST
+            # for a variable a wildcard pattern already brings in, for example).
             return
         self._chunks.add(chunk)
         sub = declare_fifo_subscriber(self._session, self._var_prefix + chunk)
@@ -160,37 +161,31 @@ class RecorderService:
             self._drain(recorder, deadline=time.monotonic() + 2.0)
         finally:
             for sub in self._subscribers:
-                try:
+                with contextlib.suppress(zenoh.ZError):
                     sub.undeclare()
-                except zenoh.ZError:
-                    pass
             if recorder is not None:
                 self._drain(recorder, deadline=time.monotonic() + 0.5)
                 recorder.stop()
             self._subscribers.clear()
             for entity in (status_q, token):
                 if entity is not None:
-                    try:
-                        entity.undeclare()
-                    except zenoh.ZError:
-                        pass
+                    with contextlib.suppress(zenoh.ZError):
+                        entity.undeclare()  # type: ignore[no-untyped-call]  # zenoh's stub
             outbox.close()
             publisher.close()
             session.close()
             self._session = None
         return RecorderStatsView(recorder.stats.as_dict() if recorder else {}, errors)
 
-    def _declare_status(self, session: zenoh.Session, recorder: Recorder) -> object:
+    def _declare_status(self, session: zenoh.Session, recorder: Recorder) -> zenoh.Queryable[None]:
         key = service_key(self.options.root, self.options.vehicle, "status")
 
         def reply(query: zenoh.Query) -> None:
             stats = recorder.stats.as_dict()
             session_dir = recorder.session.directory if recorder.session else None
             body = {"vehicle": self.options.vehicle, "directory": session_dir, **stats}
-            try:
+            with contextlib.suppress(zenoh.ZError):
                 query.reply(key, json.dumps(body), encoding=zenoh.Encoding.APPLICATION_JSON)
-            except zenoh.ZError:
-                pass
 
         with translate_zerror("status queryable"):
             return session.declare_queryable(key, reply)
