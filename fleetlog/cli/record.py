@@ -12,7 +12,16 @@ from typing import Annotated
 import typer
 
 from fleetlog.cli.app import app
-from fleetlog.cli.options import Config, Connect, Listen, Mode, NoScouting, Root, checked_root, session_options
+from fleetlog.cli.options import (
+    Config,
+    Connect,
+    Listen,
+    Mode,
+    NoScouting,
+    Root,
+    checked_root,
+    session_options,
+)
 from fleetlog.errors import UsageError
 from fleetlog.moos.mission import LoggerConfig, parse_mission
 from fleetlog.recorder.engine import Recorder
@@ -49,18 +58,31 @@ def _default_vehicle() -> str:
 def record(
     mission: Annotated[
         Path | None,
-        typer.Argument(help="MOOS mission file with a 'ProcessConfig = pLogger' block.", show_default=False),
+        typer.Argument(
+            help="MOOS mission file with a 'ProcessConfig = pLogger' block.", show_default=False
+        ),
     ] = None,
     vehicle: Annotated[
         str | None,
-        typer.Option("--vehicle", "-v", help="Vehicle to record [default: the mission's Community, else the host name]."),
+        typer.Option(
+            "--vehicle",
+            "-v",
+            help="Vehicle to record [default: the mission's Community, else the host name].",
+        ),
     ] = None,
     app_name: Annotated[
-        str, typer.Option("--app-name", help="The mission block to read, as pLogger's second argument.")
+        str,
+        typer.Option("--app-name", help="The mission block to read, as pLogger's second argument."),
     ] = "pLogger",
     copy_dir: Annotated[
         list[Path] | None,
-        typer.Option("--copy-dir", help="Directory COPY_FILE_REQUEST may read from (repeatable; the mission's directory always may)."),
+        typer.Option(
+            "--copy-dir",
+            help=(
+                "Directory COPY_FILE_REQUEST may read from (repeatable; the mission's "
+                "directory always may)."
+            ),
+        ),
     ] = None,
     root: Root = "fleet",
     mode: Mode = None,
@@ -101,13 +123,19 @@ def record(
 
     def on_signal(signum: int, frame: object) -> None:
         service.stop()
+        # A second signal ends a shutdown that hangs, as users expect of a second Ctrl-C.
+        signal.signal(signum, signal.SIG_DFL)
 
     signal.signal(signal.SIGINT, on_signal)
     signal.signal(signal.SIGTERM, on_signal)
 
     def ready(recorder: Recorder) -> None:
         where = recorder.session.directory if recorder.session else "?"
-        print(f"fleetlog: recording vehicle {veh!r} into {where} (Ctrl-C to stop)", file=sys.stderr, flush=True)
+        print(
+            f"fleetlog: recording vehicle {veh!r} into {where} (Ctrl-C to stop)",
+            file=sys.stderr,
+            flush=True,
+        )
 
     view = service.run(on_ready=ready)
     print(f"fleetlog: stopped: {view.summary()}", file=sys.stderr)
