@@ -201,6 +201,8 @@ class Recorder:
                 f"could not create {self.config.path}/{session.root}: "
                 f"logging to the fallback {session.directory}"
             )
+        for warning in session.warnings:
+            self.debug(warning)
         if self.synclog is not None and session.slog is not None:
             text = self.synclog.start(session.banner(".slog", now), now - self.logstart)
             self._write_slog(text)

@@ -109,6 +109,8 @@ class SessionWriter:
         self.blog: PlainStream
         self._streams: list[OutStream] = []
         self.closed = False
+        #: problems that did not stop the session (the hint file could not be written)
+        self.warnings: list[str] = []
 
     # ----------------------------------------------------------------------------------------
     @classmethod
@@ -221,7 +223,12 @@ class SessionWriter:
                 near = (layout.mission_path.parent if layout.mission_path else self._cwd) / task
                 task = self._cwd / task if (self._cwd / task).exists() else near
             self._backup(task, "._hoof", None)
-        self.write_hint()
+        try:
+            self.write_hint()
+        except StorageError as err:
+            # pLogger ignores a summary file it cannot write; a read-only working directory
+            # (a service started in /) must not stop logging into a writable Path.
+            self.warnings.append(str(err))
         self.flush(now)
 
     def _track(self, stream: OutStream) -> OutStream:
