@@ -1,4 +1,4 @@
-"""The ``.alog`` text format: banner and entry lines, written and read back (MOOS_FORMAT.md §2).
+r"""The ``.alog`` text format: banner and entry lines, written and read back (MOOS_FORMAT.md §2).
 
 Pure code: strings in, strings and :class:`Entry` objects out. The same line format serves the
 ``.xlog`` (§2.5); the banner serves the ``.slog``, ``.ylog`` and ``._moos`` too (§2.1).
@@ -6,7 +6,7 @@ Pure code: strings in, strings and :class:`Entry` objects out. The same line for
 Reading follows §12's reader rule: an entry line starts with a digit (or ``-`` and a digit, for
 the negative times real pLogger writes); its value is everything after the source field's
 padding and its one separator space, minus exactly one terminator space, so leading spaces,
-empty strings, ``\\r`` and multi-line values survive. Lines that follow an entry and do not
+empty strings, ``\r`` and multi-line values survive. Lines that follow an entry and do not
 start like an entry or with ``%`` continue its value.
 """
 
@@ -22,8 +22,8 @@ from fleetlog.errors import FormatError
 
 __all__ = [
     "BANNER_RULE",
-    "BinaryRef",
     "Banner",
+    "BinaryRef",
     "Entry",
     "EntryParser",
     "LineFormatter",
@@ -128,7 +128,7 @@ def format_banner(
     mark_data_type: bool = False,
     left_logstart: bool = False,
 ) -> str:
-    """Return the 5-line (6 with MarkDataType) banner, each line ending in ``\\n``.
+    r"""Return the 5-line (6 with MarkDataType) banner, each line ending in ``\n``.
 
     Args:
         log_file: the full file name as pLogger builds it (``dir + "/" + root + ".alog"``).
@@ -215,7 +215,7 @@ def format_entry(
     variant: Variant = Variant.IVP,
     binary: bool = False,
 ) -> str:
-    """Return one entry line (or several, for a multi-line string) ending in ``\\n``.
+    r"""Return one entry line (or several, for a multi-line string) ending in ``\n``.
 
     ``value_text`` is the value part as it goes on disk: a padded double, a raw string (with
     any MarkDataType marker already in front), or a binary reference.
@@ -334,14 +334,25 @@ def parse_binary_ref(text: str) -> BinaryRef | None:
     return BinaryRef(match.group(1), int(match.group(2)), int(match.group(3)))
 
 
-def classify_value(text: str, *, mark_data_type: bool = False) -> tuple[float | str | BinaryRef, str]:
+def classify_value(
+    text: str, *, mark_data_type: bool = False, binary: bool = True
+) -> tuple[float | str | BinaryRef, str]:
     """Decide a value's type from its text as written; return ``(value, clean_text)``.
 
     With MarkDataType the ``D:``/``S:`` marker decides. Without it, a value that is exactly a
     double as pLogger pads it (``%.Nf`` left-justified to 12, or wider with no padding) is a
-    double and anything else a string. A ``<MOOS_BINARY>`` tag is binary either way.
+    double and anything else a string: ``"0.5"`` unpadded is a string, because pLogger would
+    have written the double 0.5 as ``"0.5"`` plus 9 spaces. A ``<MOOS_BINARY>`` tag is binary
+    either way, unless ``binary`` is False.
+
+    Args:
+        text: the value part of an entry without its terminator space.
+        mark_data_type: the file was written with MarkDataType (a ``D:``/``S:`` marker).
+        binary: whether the text may be a binary reference. Pass False when the value came
+            with a terminator space: pLogger writes binary references without one, so such a
+            value is a string that merely looks like a reference.
     """
-    if text.startswith(_BINARY_OPEN):
+    if binary and text.startswith(_BINARY_OPEN):
         ref = parse_binary_ref(text)
         if ref is not None:
             return ref, text
@@ -354,7 +365,7 @@ def classify_value(text: str, *, mark_data_type: bool = False) -> tuple[float | 
             return text[2:], text[2:]
         return text, text
     body = text.rstrip(" ")
-    if body and (len(text) == len(body) or len(text) == 12) and _DOUBLE_RE.fullmatch(body):
+    if body and len(text) == max(12, len(body)) and _DOUBLE_RE.fullmatch(body):
         return float(body), body
     return text, text
 
@@ -391,28 +402,36 @@ def _entry_fields(line: str) -> tuple[str, str, str, str] | None:
     return time_text, key, source, line[vpos:]
 
 
+def _is_ascii_digit(c: str) -> bool:
+    return "0" <= c <= "9"
+
+
 def _starts_entry(line: str) -> bool:
+    # ASCII digits only: str.isdigit() also accepts "²" or "٣", which never start pLogger's
+    # time column but may start a continuation line.
     if not line:
         return False
     c = line[0]
-    return c.isdigit() or (c == "-" and len(line) > 1 and line[1].isdigit())
+    return _is_ascii_digit(c) or (c == "-" and len(line) > 1 and _is_ascii_digit(line[1]))
 
 
 class EntryParser:
-    """Incremental alog entry parser: feed lines, get entries; keeps multi-line values whole.
+    r"""Incremental alog entry parser: feed lines, get entries; keeps multi-line values whole.
 
-    Lines are given without their ``\\n``. Banner and comment lines (``%``) are skipped. The
+    Lines are given without their ``\n``. Banner and comment lines (``%``) are skipped. The
     parser is strict only where a real file cannot differ: a line that starts like an entry
     but is not shaped like one continues the previous value, as a continuation line would.
 
     Attributes:
         mark_data_type: read ``D:``/``S:`` markers (set from the banner by :func:`iter_entries`).
         orphans: continuation lines seen before any entry (a file cut at its head).
+        dropped: last entries dropped by :meth:`close` because they were cut short.
     """
 
     def __init__(self, *, mark_data_type: bool = False) -> None:
         self.mark_data_type = mark_data_type
         self.orphans = 0
+        self.dropped = 0
         self._head: tuple[float, str, str, int] | None = None
         self._parts: list[str] = []
 
@@ -435,17 +454,30 @@ class EntryParser:
         return None
 
     def close(self, *, complete: bool = True) -> Entry | None:
-        """Finish the last entry.
+        r"""Finish the last entry.
+
+        pLogger ends every entry with its terminator (a space, or the binary tag's close), so
+        a last entry without one was cut inside a multi-line value (``"hello"`` of
+        ``"hello\ndebug"``): it is dropped like a cut line, and counted in :attr:`dropped`.
 
         Args:
-            complete: False when the last line had no ``\\n`` (a truncated file); its entry is
+            complete: False when the last line had no ``\n`` (a truncated file); its entry is
                 then dropped, because its value may be cut short.
         """
-        if not complete:
+        if self._head is None:
+            return None
+        if not complete or not self._terminated():
             self._head = None
             self._parts = []
+            self.dropped += 1
             return None
         return self._finish()
+
+    def _terminated(self) -> bool:
+        last = self._parts[-1]
+        return last.endswith(" ") or (
+            self._parts[0].startswith(_BINARY_OPEN) and last.endswith(_BINARY_CLOSE)
+        )
 
     def _finish(self) -> Entry | None:
         head = self._head
@@ -454,23 +486,27 @@ class EntryParser:
         self._head = None
         raw = "\n".join(self._parts)
         self._parts = []
-        if raw.startswith(_BINARY_OPEN) and raw.endswith(_BINARY_CLOSE):
-            text = raw
-        elif raw.endswith(" "):
+        if raw.endswith(" "):
+            # The terminator space: a string or a double, never a binary reference.
             text = raw[:-1]
+            terminated = True
         else:
-            # No terminator space: not what pLogger writes, but keep the value as it stands.
+            # A binary reference, or (not what pLogger writes) a value without its
+            # terminator space, kept as it stands.
             text = raw
-        value, clean = classify_value(text, mark_data_type=self.mark_data_type)
+            terminated = False
+        value, clean = classify_value(
+            text, mark_data_type=self.mark_data_type, binary=not terminated
+        )
         offset, key, source, lineno = head
         return Entry(offset, key, source, value, clean, lineno)
 
 
 def parse_banner(lines: list[str], path: str | None = None) -> Banner:
-    """Parse the banner at the top of a bannered file.
+    r"""Parse the banner at the top of a bannered file.
 
     Args:
-        lines: the file's first lines, without ``\\n`` (at least the banner's).
+        lines: the file's first lines, without ``\n`` (at least the banner's).
         path: the file's name, for error messages.
 
     Raises:
@@ -484,15 +520,21 @@ def parse_banner(lines: list[str], path: str | None = None) -> Banner:
     for index, line in enumerate(lines[1:], start=2):
         if line == BANNER_RULE:
             if "LOGSTART" not in fields:
-                raise FormatError("banner has no LOGSTART line", path, index)
+                msg = "banner has no LOGSTART line"
+                raise FormatError(msg, path, index)
             text = fields["LOGSTART"].strip()
             try:
                 logstart = float(text)
             except ValueError:
-                raise FormatError(f"LOGSTART {text!r} is not a number", path, index) from None
+                msg = f"LOGSTART {text!r} is not a number"
+                raise FormatError(msg, path, index) from None
             return Banner(
-                fields.get("LOG FILE", ""), fields.get("FILE OPENED ON", ""), logstart, text,
-                mark, index,
+                fields.get("LOG FILE", ""),
+                fields.get("FILE OPENED ON", ""),
+                logstart,
+                text,
+                mark,
+                index,
             )
         if line == DATATYPE_MARKING:
             mark = True
@@ -503,17 +545,35 @@ def parse_banner(lines: list[str], path: str | None = None) -> Banner:
         elif line.startswith("%% LOGSTART"):
             fields["LOGSTART"] = line[len("%% LOGSTART") :]
         elif not line.startswith("%"):
-            raise FormatError("banner ends before its closing line of 59 '%'", path, index)
-    raise FormatError("banner is not closed by a line of 59 '%'", path, len(lines))
+            msg = "banner ends before its closing line of 59 '%'"
+            raise FormatError(msg, path, index)
+    msg = "banner is not closed by a line of 59 '%'"
+    raise FormatError(msg, path, len(lines))
 
 
-def iter_entries(lines: Iterable[str], *, mark_data_type: bool = False) -> Iterator[Entry]:
-    """Yield the entries of alog text given as ``\\n``-terminated lines.
+def iter_entries(
+    lines: Iterable[str], *, mark_data_type: bool = False, parser: EntryParser | None = None
+) -> Iterator[Entry]:
+    r"""Yield the entries of alog text given as ``\n``-terminated lines.
 
-    A last line without ``\\n`` is treated as truncated: its entry is dropped. The banner's
+    A last line without ``\n`` is treated as truncated: its entry is dropped. The banner's
     ``DATATYPE MARKING ON`` line switches marker reading on.
+
+    A reader that knows its text was cut exactly after a ``\n`` (a compressed stream that
+    ended early) passes an empty last line: the entry before it may be missing continuation
+    lines, so it is dropped too. Without that mark a cut at a line boundary inside a
+    multi-line value is indistinguishable from a whole file.
+
+    Args:
+        lines: the text's lines, each ending in ``\n`` except perhaps the last.
+        mark_data_type: read ``D:``/``S:`` markers from the start.
+        parser: the parser to use, for callers that want its ``orphans`` and ``dropped``
+            counts afterwards; a new one by default.
     """
-    parser = EntryParser(mark_data_type=mark_data_type)
+    if parser is None:
+        parser = EntryParser(mark_data_type=mark_data_type)
+    elif mark_data_type:
+        parser.mark_data_type = True
     complete = True
     for lineno, line in enumerate(lines, start=1):
         if line.endswith("\n"):
