@@ -620,7 +620,8 @@ def test_logger_restart_opens_a_complete_new_session(
     ]
     ref = next(e.value for e in new if e.key == "BIN")
     assert ref == BinaryRef(f"{new_root}.blog", 53, 16)
-    assert payload_at(rig.file(".blog").read_bytes(), ref) == b"fedcba9876543210"  # type: ignore[arg-type]
+    assert isinstance(ref, BinaryRef)
+    assert payload_at(rig.file(".blog").read_bytes(), ref) == b"fedcba9876543210"
     assert next(e.offset for e in new if e.key == "BIN") == 0.25  # relative to the new LOGSTART
     assert [e.key for e in rig.entries(".xlog")] == ["FOO_STATUS"]
 
@@ -1071,3 +1072,62 @@ def test_restart_into_an_unwritable_place_counts_losses_until_it_recovers(
     rig.send("A", 9.0, at=4.0)
     assert [e.value for e in rig.entries() if e.key == "A"] == [9.0]
     shutil.rmtree(tmp_path / "LOG")
+
+
+def test_an_unwritable_hint_file_does_not_stop_logging(
+    rigs: Callable[..., Rig], tmp_path: Path
+) -> None:
+    (tmp_path / "hint").mkdir()  # the summary file's path is a directory: writing it fails
+    rig = rigs("LoggingDirectorySummaryFile = hint\nLog = A @ 0")
+    (debug,) = rig.debugs()
+    assert debug == f"cannot write the session hint file {tmp_path / 'hint'}: Is a directory"
+    rig.send("A", 1.0, at=1.0)
+    assert [e.key for e in rig.entries()] == ["A"]
+
+
+def test_summary_file_elsewhere(rigs: Callable[..., Rig], tmp_path: Path) -> None:
+    rig = rigs("LoggingDirectorySummaryFile = mission/last.txt\nLog = A @ 0")
+    assert not (tmp_path / ".LastOpenedMOOSLogDirectory").exists()
+    assert (tmp_path / "mission" / "last.txt").read_text() == (
+        f"LastOpenedLoggingDirectory=./{rig.root}\n"
+    )
+
+
+@pytest.mark.parametrize("where", ["cwd", "mission"])
+def test_helm_task_file_is_backed_up_as_hoof(
+    rigs: Callable[..., Rig], tmp_path: Path, where: str
+) -> None:
+    task = (tmp_path if where == "cwd" else tmp_path / "mission") / "alpha.bhv"
+    task.write_bytes(b"Behavior = BHV_Loiter\n{ }\n")
+    head = "ProcessConfig = pHelmIvP\n{\n  TaskFile = alpha.bhv\n}\n"
+    moos = tmp_path / "mission" / "alpha.moos"
+    moos.write_text(mission_text("Log = A @ 0", head=head))
+    rig = rigs("Log = A @ 0", head=head, mission=moos)
+    assert rig.file("._hoof").read_bytes() == b"Behavior = BHV_Loiter\n{ }\n"  # raw, no banner
+    assert rig.read("._moos").endswith(mission_text("Log = A @ 0", head=head) + "\n")
+
+
+@pytest.fixture
+def new_york() -> Iterator[None]:
+    """Run in US Eastern time (five hours behind UTC in January)."""
+    old = os.environ.get("TZ")
+    os.environ["TZ"] = "America/New_York"
+    time.tzset()
+    try:
+        yield
+    finally:
+        if old is None:
+            del os.environ["TZ"]
+        else:
+            os.environ["TZ"] = old
+        time.tzset()
+
+
+@pytest.mark.usefixtures("new_york")
+@pytest.mark.parametrize("utc", [False, True])
+def test_utc_log_directories(rigs: Callable[..., Rig], utc: bool) -> None:
+    rig = rigs(f"File = T\nUTCLogDirectories = {str(utc).lower()}\nLog = A @ 0")
+    # T0 is 08:00:00 UTC on 15 Jan 2027, 03:00:00 in New York
+    assert rig.root == ("T_15_1_2027_____08_00_00" if utc else "T_15_1_2027_____03_00_00")
+    # the opening date is local time either way, in C's ctime layout
+    assert rig.read(".alog").split("\n")[2] == "%% FILE OPENED ON  Fri Jan 15 03:00:00 2027"
