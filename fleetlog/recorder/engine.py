@@ -155,6 +155,8 @@ class Recorder:
         self._pending = 0
         #: the open session is the recorder's own fallback after a write error
         self._in_fallback = False
+        #: keys already reported as naming no variable
+        self._unreadable: set[str] = set()
 
     # ---------------------------------------------------------------------------------------
     # Sessions
@@ -363,6 +365,21 @@ class Recorder:
         if is_command:
             self._command(msg)
 
+    def unreadable(self, key: str) -> None:
+        """Count a sample whose key names no MOOS variable (a malformed escape, docs/wire.md).
+
+        It cannot be logged without a name; it is counted as garbled and lost, and the
+        first one of each key is reported on MOOS_DEBUG.
+        """
+        stats = self.stats
+        stats.received += 1
+        stats.garbled += 1
+        stats.lost += 1
+        if key not in self._unreadable:
+            if len(self._unreadable) < 1024:
+                self._unreadable.add(key)
+            self.debug(f"sample on {key} names no MOOS variable: not logged")
+
     def _line(self, session: SessionWriter, offset: float, name: str, msg: MoosMessage) -> str:
         value = msg.value
         source = self._source(msg)
@@ -412,7 +429,11 @@ class Recorder:
         if spec.monitor:
             self.monitored.append(spec.var)
         if self._subscribe is not None:
-            self._subscribe(spec.var)
+            try:
+                self._subscribe(spec.var)
+            except FleetlogError as err:
+                # Logged if a wider subscription brings it in; the operator must know.
+                self.debug(f"could not subscribe to {spec.var}: {err}")
         if self.synclog is not None:
             had_free = bool(self.synclog.placeholders)
             offset = self._clock() - self.logstart

@@ -204,6 +204,8 @@ class RecorderService:
                     incoming = decoder.decode(sample)
                     if incoming is not None:
                         recorder.handle(incoming.message, garbled=incoming.garbled)
+                    else:
+                        recorder.unreadable(str(sample.key_expr))
                     got += 1
                     try:
                         sample = sub.try_recv()
@@ -231,6 +233,8 @@ class RecorderService:
                     incoming = decode(sample)
                     if incoming is not None:
                         handle(incoming.message, garbled=incoming.garbled)
+                    else:
+                        recorder.unreadable(str(sample.key_expr))
                     batch += 1
                     if not batch & 127 and recorder.flush_due(_FLUSH_DELAY):
                         recorder.flush()

@@ -608,6 +608,15 @@ def test_no_mission_logs_everything_with_liveliness_and_sigterm(
             done = poke(endpoint, tmp_path, cli_env, "ANYTHING=1", "ELSE:=two words")
             assert done.returncode == 0, done.stderr
             assert "-> vehicle bravo" in done.stderr  # the one reachable recorder
+            # a plain Zenoh publisher: no fleetlog encoding, no attachment
+            with Vehicle("bravo", session=watcher) as v:
+                assert v.wait_for_subscriber("RAW_NUM", timeout=10.0)
+                watcher.put("fleet/bravo/var/RAW_NUM", "-3.5e2")
+                watcher.put("fleet/bravo/var/RAW_TEXT", "free text")
+                watcher.put("fleet/bravo/var/RAW_BIN", b"\xff\x00\n")
+                watcher.put("fleet/bravo/var/BAD%ZZ", "a key that names no variable")
+                assert v.confirm(timeout=10.0)
+            time.sleep(0.3)  # the recorder's MOOS_DEBUG about BAD%ZZ comes back through Zenoh
             assert rec.stop(signal.SIGTERM) == 0
         finally:
             rec.close()
@@ -623,8 +632,22 @@ def test_no_mission_logs_everything_with_liveliness_and_sigterm(
     assert sorted(p.name for p in directory.iterdir()) == sorted(
         f"{root}{ext}" for ext in (".alog", ".ylog", ".blog")
     )
-    got = {(e.key, e.value) for e in entries(directory / f"{root}.alog")}
+    logged = entries(directory / f"{root}.alog")
+    got = {(e.key, e.value) for e in logged}
     assert {("ANYTHING", 1.0), ("ELSE", "two words"), ("LOGGER_DIRECTORY", f"./{root}")} <= got
+    raw = {e.key: (e.source, e.value) for e in logged if e.key.startswith("RAW_")}
+    assert raw["RAW_NUM"] == ("?", -350.0)
+    assert raw["RAW_TEXT"] == ("?", "free text")
+    source, ref = raw["RAW_BIN"]
+    assert source == "?"
+    assert isinstance(ref, BinaryRef)
+    assert payload_at((directory / f"{root}.blog").read_bytes(), ref) == b"\xff\x00\n"
+    # nothing silent: the unreadable key is counted and reported
+    assert (
+        "MOOS_DEBUG",
+        "sample on fleet/bravo/var/BAD%ZZ names no MOOS variable: not logged",
+    ) in got
+    assert "garbled 1, lost 1" in rec.stderr
 
 
 def test_poke_without_a_recorder_fails_in_one_line(tmp_path: Path, cli_env: dict[str, str]) -> None:

@@ -22,6 +22,7 @@ from pathlib import Path
 import pytest
 import zstandard
 
+from fleetlog.errors import TransportError
 from fleetlog.moos.alog import BinaryRef, Entry, Variant, format_banner, iter_entries
 from fleetlog.moos.blog import payload_at
 from fleetlog.moos.mission import LoggerConfig, parse_mission
@@ -1131,3 +1132,18 @@ def test_utc_log_directories(rigs: Callable[..., Rig], utc: bool) -> None:
     assert rig.root == ("T_15_1_2027_____08_00_00" if utc else "T_15_1_2027_____03_00_00")
     # the opening date is local time either way, in C's ctime layout
     assert rig.read(".alog").split("\n")[2] == "%% FILE OPENED ON  Fri Jan 15 03:00:00 2027"
+
+
+def test_unreadable_keys_and_failed_subscriptions_are_reported(rigs: Callable[..., Rig]) -> None:
+    def refuse(name: str) -> None:
+        raise TransportError(f"Zenoh subscription to {name!r} failed: closed")
+
+    rig = rigs("Log = A @ 0", subscribe=refuse)
+    rig.debugs()
+    rig.rec.unreadable("fleet/alpha/var/BAD%ZZ")
+    rig.rec.unreadable("fleet/alpha/var/BAD%ZZ")
+    stats = rig.rec.stats
+    assert (stats.received, stats.garbled, stats.lost) == (2, 2, 2)
+    assert rig.debugs() == ["sample on fleet/alpha/var/BAD%ZZ names no MOOS variable: not logged"]
+    rig.cmd("LOG_REQUEST = B @ 0", at=1.0)  # accepted, but the subscription failed
+    assert rig.debugs() == ["could not subscribe to B: Zenoh subscription to 'B' failed: closed"]
