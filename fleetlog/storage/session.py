@@ -10,6 +10,7 @@ banners, the hint file and LOGGER_DIRECTORY.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import shutil
 import time
@@ -171,7 +172,9 @@ class SessionWriter:
         try:
             writer._open_files(now)
         except StorageError:
-            writer.close()
+            # Closing flushes the same broken file again; the first error is the one to report.
+            with contextlib.suppress(StorageError):
+                writer.close()
             raise
         return writer
 

@@ -1147,3 +1147,39 @@ def test_unreadable_keys_and_failed_subscriptions_are_reported(rigs: Callable[..
     assert rig.debugs() == ["sample on fleet/alpha/var/BAD%ZZ names no MOOS variable: not logged"]
     rig.cmd("LOG_REQUEST = B @ 0", at=1.0)  # accepted, but the subscription failed
     assert rig.debugs() == ["could not subscribe to B: Zenoh subscription to 'B' failed: closed"]
+
+
+@pytest.mark.skipif(not Path("/dev/full").exists(), reason="needs /dev/full")
+def test_a_full_disk_on_restart_falls_back_to_the_working_directory(
+    rigs: Callable[..., Rig], tmp_path: Path
+) -> None:
+    (tmp_path / "logs").mkdir()
+    rig = rigs("File = LOG\nFileTimeStamp = false\nPath = logs\nLog = A @ 0")
+    alog = tmp_path / "logs" / "LOG" / "LOG.alog"
+    alog.unlink()
+    alog.symlink_to("/dev/full")  # the reopened alog: every write fails with ENOSPC
+    rig.debugs()
+    rig.send("LOGGER_RESTART", "disk full", at=1.0)
+    debugs = rig.debugs()
+    assert debugs[0] == "Closing : LOG"
+    assert (
+        debugs[1]
+        == f"write error, samples are being lost: cannot write {alog}: No space left on device"
+    )
+    assert debugs[2:] == ["now logging to the fallback ./LOG", "Now Logging to : LOG"]
+    assert rig.dir == tmp_path / "LOG"
+    rig.send("A", 5.0, at=2.0)
+    assert [e.value for e in rig.entries()] == [5.0]
+    assert rig.rec.stats.write_errors == 1
+
+
+def test_logger_restart_is_not_logged_without_a_log_entry_or_wildcard(
+    rigs: Callable[..., Rig], tmp_path: Path
+) -> None:
+    rig = rigs("File = R\nLog = A @ 0")
+    old = rig.file(".alog")
+    rig.send("A", 1.0, at=0.5)
+    rig.send("LOGGER_RESTART", "true", at=1.5)
+    assert rig.file(".alog") != old
+    assert [e.key for e in rig.entries(path=old)] == ["A"]  # the restart itself: not logged
+    assert rig.rec.stats.ignored == 1
