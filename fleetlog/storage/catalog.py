@@ -1,0 +1,430 @@
+"""The sessions of a log root, as the query services describe and serve them.
+
+A *session* is a directory directly under the log root that holds an alog (``.alog``,
+``.alog.gz`` or ``.alog.zst``): what fleetlog's recorder and real pLogger both write
+(MOOS_FORMAT.md §1). Sessions are ordered by the time stamp in their name
+(:func:`fleetlog.moos.naming.parse_session_root`), else by their directory's modification
+time.
+
+* **latest** — the session the recorder is writing, if it said so; else the one the
+  ``.LastOpenedMOOSLogDirectory`` hint names (``--hint FILE``, else the hint in the log root,
+  else in its parent, where pLogger leaves it: its working directory, usually the mission
+  directory above ``Path``); else the newest. The hint is matched by the directory's last
+  component, because pLogger writes the path as it was configured (absolute, or relative to
+  its working directory), which rarely resolves the same way where the server runs.
+* **complete** — a session is being written if it is the recorder's open session; without a
+  recorder (``fleetlog serve`` of old or foreign directories), if one of its files changed in
+  the last few seconds.
+* Details read from the alog (LOGSTART, duration, vehicle, variables count) are cached by the
+  alog's size and modification time, so listing again costs a ``stat`` per file.
+
+Every path is confined to the log root (:mod:`fleetlog.storage.confined`).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import stat
+import threading
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path, PurePosixPath
+
+from fleetlog.errors import FormatError, StorageError
+from fleetlog.moos.naming import HINT_FILE_NAME, parse_hint_file, parse_session_root
+from fleetlog.storage.alogscan import HeadInfo, VariableScan, is_compressed, read_head, tail_offset
+from fleetlog.storage.confined import ConfinedRoot, DigestCache
+from fleetlog.wire.query import FileInfo, FileMeta, LatestInfo, SessionInfo, check_component
+
+__all__ = ["ALOG_SUFFIXES", "QUIET_SECONDS", "LogCatalog"]
+
+ALOG_SUFFIXES = (".alog", ".alog.zst", ".alog.gz")
+#: a session none of whose files changed for this long is complete (without a recorder)
+QUIET_SECONDS = 5.0
+_HINT_MAX = 4096
+_COMMUNITY_LINE = re.compile(r"^[ \t]*community[ \t]*=(.*)$", re.IGNORECASE | re.MULTILINE)
+_MOOS_HEAD = 64 << 10
+
+
+@dataclass
+class _Details:
+    """What was read from a session's alog, and the alog state it belongs to."""
+
+    identity: tuple[int, int, int]
+    head: HeadInfo
+    duration: float | None
+    variables: int | None
+    community: str | None
+
+
+def _alog_of(session: str, names: list[str]) -> str | None:
+    """Pick the session's alog: the one named after the directory, else the first one."""
+    for suffix in ALOG_SUFFIXES:
+        if session + suffix in names:
+            return session + suffix
+    alogs = sorted(n for n in names if n.endswith(ALOG_SUFFIXES))
+    return alogs[0] if alogs else None
+
+
+class LogCatalog:
+    """The sessions under a log root, their files and their details.
+
+    Safe to use from several threads: details are computed under a lock per alog.
+
+    Args:
+        log_root: the directory holding the session directories.
+        vehicle: the serving vehicle, used when a session does not say which one wrote it.
+        active: returns the session directory the recorder is writing now (or None); given
+            by the recorder, it decides which session is being written.
+        hint: a ``.LastOpenedMOOSLogDirectory`` file to read instead of the default places.
+        quiet: seconds without change after which a session counts as complete (without
+            ``active``).
+        clock: the wall clock (tests pass their own).
+
+    Raises:
+        StorageError: the log root is not a directory.
+    """
+
+    def __init__(
+        self,
+        log_root: str | os.PathLike[str],
+        *,
+        vehicle: str,
+        active: Callable[[], str | os.PathLike[str] | None] | None = None,
+        hint: str | os.PathLike[str] | None = None,
+        quiet: float = QUIET_SECONDS,
+        clock: Callable[[], float] = time.time,
+    ) -> None:
+        self.root = ConfinedRoot(log_root)
+        self.vehicle = vehicle
+        self.digests = DigestCache()
+        self._active = active
+        self._hint = Path(hint) if hint is not None else None
+        self._quiet = quiet
+        self._clock = clock
+        self._lock = threading.Lock()
+        self._details: dict[Path, _Details] = {}
+        self._scans: dict[Path, VariableScan] = {}
+        self._busy: dict[Path, threading.Lock] = {}
+
+    # -- listing
+
+    def _entries(self, directory: Path) -> list[os.DirEntry[str]]:
+        try:
+            with os.scandir(directory) as it:
+                return list(it)
+        except OSError as err:
+            msg = f"cannot list {directory}: {err.strerror or err}"
+            raise StorageError(msg) from err
+
+    def _session_files(self, session: str) -> list[tuple[str, os.stat_result]]:
+        """Return the regular files of a session (confined), with their stat."""
+        directory = self.root.resolve(session)
+        files: list[tuple[str, os.stat_result]] = []
+        for entry in self._entries(directory):
+            try:
+                check_component(entry.name, "file")
+            except FormatError:
+                continue
+            if entry.is_symlink() and not self.root.contains(entry.path):
+                continue  # a symlink leaving the root is never listed (nor served)
+            try:
+                st = os.stat(entry.path)
+            except OSError:
+                continue
+            if stat.S_ISREG(st.st_mode):
+                files.append((entry.name, st))
+        files.sort()
+        return files
+
+    def _is_session_dir(self, entry: os.DirEntry[str]) -> bool:
+        try:
+            check_component(entry.name, "session")
+            if not entry.is_dir() or not self.root.contains(entry.path):
+                return False
+            with os.scandir(entry.path) as it:
+                return any(e.name.endswith(ALOG_SUFFIXES) for e in it)
+        except (OSError, FormatError):
+            return False
+
+    def session_names(self) -> list[str]:
+        """Return the sessions' names, oldest first.
+
+        Raises:
+            StorageError: the log root cannot be listed.
+        """
+        found: list[tuple[float, str]] = []
+        for entry in self._entries(self.root.path):
+            if self._is_session_dir(entry):
+                found.append((self._order(entry.name, entry), entry.name))
+        found.sort()
+        return [name for _, name in found]
+
+    @staticmethod
+    def _order(name: str, entry: os.DirEntry[str] | None = None) -> float:
+        parsed = parse_session_root(name)
+        if parsed is not None:
+            return parsed[1].timestamp()
+        try:
+            return entry.stat().st_mtime if entry is not None else 0.0
+        except OSError:
+            return 0.0
+
+    def has_session(self, session: str) -> bool:
+        """Return True if ``session`` names a session directory under the root."""
+        try:
+            directory = self.root.resolve(session)
+            with os.scandir(directory) as it:
+                return any(e.name.endswith(ALOG_SUFFIXES) for e in it)
+        except (OSError, FormatError, StorageError):
+            return False
+
+    def _require(self, session: str) -> None:
+        if not self.has_session(session):
+            msg = f"no session {session!r} in this log root"
+            raise StorageError(msg)
+
+    # -- state
+
+    def _active_path(self) -> Path | None:
+        if self._active is None:
+            return None
+        try:
+            current = self._active()
+        except Exception:  # the recorder's view must never break a listing
+            return None
+        return None if current is None else Path(os.path.realpath(current))
+
+    def active_session(self) -> str | None:
+        """Return the name of the session the recorder is writing, if it is under the root."""
+        current = self._active_path()
+        if current is None or current.parent != self.root.path:
+            return None
+        return current.name
+
+    def is_complete(
+        self, session: str, files: list[tuple[str, os.stat_result]] | None = None
+    ) -> bool:
+        """Return True if ``session`` is no longer being written.
+
+        Raises:
+            StorageError: the session cannot be listed.
+        """
+        if self._active is not None:
+            return session != self.active_session()
+        if files is None:
+            files = self._session_files(session)
+        newest = max((st.st_mtime for _, st in files), default=0.0)
+        return newest < self._clock() - self._quiet
+
+    # -- sessions
+
+    def session(self, session: str, *, brief: bool = False) -> SessionInfo:
+        """Describe one session.
+
+        Args:
+            session: its name.
+            brief: names, files, sizes and completeness only, without reading the alog.
+
+        Raises:
+            FormatError: the name is not a single path component.
+            StorageError: no such session, or it cannot be read.
+        """
+        self._require(session)
+        files = self._session_files(session)
+        parsed = parse_session_root(session)
+        info = SessionInfo(
+            name=session,
+            files=tuple(FileInfo(name, st.st_size, st.st_mtime) for name, st in files),
+            complete=self.is_complete(session, files),
+            stamp=parsed[1].replace(microsecond=0).isoformat() if parsed else None,
+            alog=_alog_of(session, [name for name, _ in files]),
+        )
+        if brief or info.alog is None:
+            return info
+        details = self._details_of(session, info.alog, dict(files)[info.alog])
+        head = details.head
+        return SessionInfo(
+            name=info.name,
+            files=info.files,
+            complete=info.complete,
+            stamp=info.stamp,
+            alog=info.alog,
+            start=head.banner.logstart if head.banner else None,
+            duration=details.duration,
+            vehicle=details.community or self.vehicle,
+            variables=details.variables,
+        )
+
+    def sessions(self, *, brief: bool = False) -> list[SessionInfo]:
+        """Describe every session, oldest first; sessions that vanish meanwhile are left out.
+
+        Raises:
+            StorageError: the log root cannot be listed.
+        """
+        out: list[SessionInfo] = []
+        for name in self.session_names():
+            try:
+                out.append(self.session(name, brief=brief))
+            except StorageError:
+                continue
+        return out
+
+    def _details_of(self, session: str, alog: str, st: os.stat_result) -> _Details:
+        path = self.root.resolve(session, alog)
+        identity = (st.st_ino, st.st_size, st.st_mtime_ns)
+        with self._lock:
+            known = self._details.get(path)
+            busy = self._busy.setdefault(path, threading.Lock())
+        if known is not None and known.identity == identity:
+            return known
+        with busy:
+            with self._lock:
+                known = self._details.get(path)
+            if known is not None and known.identity == identity:
+                return known
+            head = read_head(path)
+            scan = self._scans.get(path) or VariableScan(path)
+            scan.update()
+            duration = scan.last_offset if is_compressed(path) else tail_offset(path)
+            community = head.community or self._moos_community(session)
+            details = _Details(identity, head, duration, scan.count, community)
+            with self._lock:
+                self._scans[path] = scan
+                self._details[path] = details
+            return details
+
+    def head(self, session: str) -> tuple[str, HeadInfo]:
+        """Return a session's alog name and what its head says (for the remote grep).
+
+        Raises:
+            StorageError: no such session, or it holds no alog.
+        """
+        info = self.session(session, brief=True)
+        if info.alog is None:
+            msg = f"session {session!r} holds no alog"
+            raise StorageError(msg)
+        return info.alog, read_head(self.root.resolve(session, info.alog))
+
+    def alog_path(self, session: str) -> Path:
+        """Return the confined real path of a session's alog.
+
+        Raises:
+            StorageError: no such session, or it holds no alog.
+        """
+        alog, _ = self.head(session)
+        return self.root.resolve(session, alog)
+
+    def _moos_community(self, session: str) -> str | None:
+        for name, _ in self._session_files(session):
+            if not name.endswith("._moos"):
+                continue
+            try:
+                with self.root.open(session, name) as (fd, _st):
+                    text = os.pread(fd, _MOOS_HEAD, 0).decode("utf-8", "replace")
+            except (OSError, StorageError, FormatError):
+                continue
+            match = _COMMUNITY_LINE.search(text)
+            if match:
+                value = "".join(match.group(1).split())
+                if value:
+                    return value
+        return None
+
+    # -- latest
+
+    def _hint_files(self) -> list[Path]:
+        if self._hint is not None:
+            return [self._hint]
+        return [self.root.path / HINT_FILE_NAME, self.root.path.parent / HINT_FILE_NAME]
+
+    def read_hint(self) -> str | None:
+        """Return the directory the first readable hint file names, as written."""
+        for path in self._hint_files():
+            try:
+                with path.open("rb") as file:
+                    text = file.read(_HINT_MAX).decode("utf-8", "surrogateescape")
+                return parse_hint_file(text, str(path))
+            except (OSError, FormatError):
+                continue
+        return None
+
+    def latest(self) -> LatestInfo:
+        """Find the latest session (see the module docstring).
+
+        Raises:
+            StorageError: the log root cannot be listed.
+        """
+        hint = self.read_hint()
+        active = self.active_session()
+        name: str | None = None
+        how = "newest"
+        if active is not None and self.has_session(active):
+            name, how = active, "recorder"
+        elif hint is not None:
+            candidate = PurePosixPath(hint.rstrip("/")).name
+            if candidate and self.has_session(candidate):
+                name, how = candidate, "hint"
+        if name is None:
+            names = self.session_names()
+            name = names[-1] if names else None
+        if name is None:
+            return LatestInfo(self.vehicle, None, False, how, hint)
+        start = None
+        try:
+            _, head = self.head(name)
+            start = head.banner.logstart if head.banner else None
+        except StorageError:
+            pass
+        return LatestInfo(self.vehicle, name, not self.is_complete(name), how, hint, start)
+
+    def guess_vehicle(self) -> str | None:
+        """Return the community that wrote the latest session, if it says (for ``serve``).
+
+        Reads the alog's head and the ``._moos`` only, never the whole alog.
+        """
+        latest = self.latest().session
+        if latest is None:
+            return None
+        try:
+            _, head = self.head(latest)
+        except StorageError:
+            return self._moos_community(latest)
+        return head.community or self._moos_community(latest)
+
+    # -- files
+
+    def read_range(
+        self, session: str, name: str, offset: int, length: int
+    ) -> tuple[bytes, FileMeta]:
+        """Read a byte range of a session's file.
+
+        Raises:
+            FormatError: a name is not a single path component.
+            StorageError: no such session or file, a path leaving the root, or an offset past
+                the end of the file.
+        """
+        self._require(session)
+        data, st = self.root.read_range((session, name), offset, length)
+        meta = FileMeta(offset, len(data), st.st_size, st.st_mtime, self.is_complete(session))
+        return data, meta
+
+    def file_digest(
+        self, session: str, name: str, cancel: threading.Event | None = None
+    ) -> FileMeta:
+        """Return a file's meta with the sha256 of the whole file, if the session is complete.
+
+        A file of a session still being written has no final digest: ``sha256`` is None.
+
+        Raises:
+            FormatError: a name is not a single path component.
+            StorageError: as :meth:`read_range`, or the file changed while being hashed.
+        """
+        self._require(session)
+        if not self.is_complete(session):
+            _, st = self.root.read_range((session, name), 0, 0)
+            return FileMeta(0, 0, st.st_size, st.st_mtime, False)
+        digest, st = self.digests.sha256(self.root, (session, name), cancel)
+        return FileMeta(0, 0, st.st_size, st.st_mtime, True, digest)
