@@ -1,0 +1,414 @@
+"""Fetching a vehicle's session: resumable, verified, parallel ranges, optionally following.
+
+:func:`fetch_session` downloads every file of a session into ``<out>/<session>/`` (the layout
+pLogger writes), each through a :class:`~fleetlog.storage.download.PartFile`:
+
+* ranges of 1 MiB with a few in flight (measured here: one range at a time halves the rate,
+  four reach it), appended in order so the ``.part`` length is always what arrived;
+* a resumed or followed file is checked first: the range that continues it starts 4 KiB
+  early, and those bytes must equal the end of the ``.part`` (a vehicle that rewrote the file,
+  as pLogger does with ``FileTimeStamp = false``, is caught and the file fetched again);
+* a complete file is verified against the vehicle's sha256 (asked for at the start, so the
+  vehicle hashes while it sends) and only then renamed to its real name;
+* a file of a session still being written stays a ``.part``: without ``follow`` the fetch
+  takes what exists and returns; with ``follow`` it keeps fetching what is appended until the
+  session completes, then verifies and renames;
+* when the vehicle stops answering (link dropped, vehicle stopped) the range is retried with
+  backoff for ``retry_for`` seconds; after that the fetch fails with the ``.part`` files in
+  place, and the same command resumes them.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from fleetlog.errors import QueryError, StorageError
+from fleetlog.query.client import FleetClient, PendingRange, TransientQueryError
+from fleetlog.storage.download import PartFile, sha256_file
+from fleetlog.wire.query import DEFAULT_RANGE, FileInfo, FileMeta, check_component
+
+__all__ = ["FetchOutcome", "FileOutcome", "Progress", "fetch_session"]
+
+WINDOW = 4
+OVERLAP = 4096
+POLL = 1.0
+RETRY_FOR = 30.0
+
+
+class Progress:
+    """Receives a fetch's progress; the default does nothing. Must be thread-safe."""
+
+    def total(self, vehicle: str, total: int) -> None:
+        """The bytes the vehicle's session holds now."""
+
+    def advance(self, vehicle: str, amount: int) -> None:
+        """``amount`` more bytes are here (received, resumed, or already up to date)."""
+
+
+@dataclass
+class FileOutcome:
+    """What happened to one file: ``fetched``, ``up to date`` or ``partial`` (.part kept)."""
+
+    name: str
+    size: int
+    status: str
+
+
+@dataclass
+class FetchOutcome:
+    """What a session fetch did.
+
+    Attributes:
+        vehicle: the vehicle.
+        session: the session.
+        directory: where its files are.
+        complete: the session was complete on the vehicle when the fetch ended.
+        received: bytes received over the network.
+        seconds: how long it took.
+        files: each file's outcome.
+    """
+
+    vehicle: str
+    session: str
+    directory: Path
+    complete: bool = False
+    received: int = 0
+    seconds: float = 0.0
+    files: list[FileOutcome] = field(default_factory=list)
+
+
+class _RateLimit:
+    """Spaces out ranges so the transfer stays under ``rate`` bytes per second."""
+
+    def __init__(self, rate: float | None) -> None:
+        self.rate = rate
+        self._next = time.monotonic()
+
+    def wait(self, amount: int) -> None:
+        if not self.rate:
+            return
+        now = time.monotonic()
+        if self._next > now:
+            time.sleep(self._next - now)
+        self._next = max(now, self._next) + amount / self.rate
+
+
+@dataclass
+class _Context:
+    client: FleetClient
+    vehicle: str
+    session: str
+    progress: Progress
+    window: int
+    chunk: int
+    retry_for: float
+    limit: _RateLimit
+    cancel: threading.Event
+    received: int = 0
+
+
+class _Restart(Exception):
+    """The vehicle's file no longer continues the ``.part``: start it over."""
+
+
+class _Transfer:
+    """One file's download, across polls."""
+
+    def __init__(self, ctx: _Context, remote: FileInfo, final: Path) -> None:
+        self.ctx = ctx
+        self.name = remote.name
+        self.final = final
+        source = {"vehicle": ctx.vehicle, "session": ctx.session, "file": remote.name}
+        self.part = PartFile(final, source)
+        self.status = ""
+        self.meta: FileMeta | None = None
+        self._digest: PendingRange | None = None
+        self._verify_tail = False
+
+    # -- start
+
+    def _ask_digest(self, size: int) -> PendingRange:
+        # Hashing runs at roughly 1 GB/s; give large files the time they need.
+        timeout = 60.0 + size / 20e6
+        return self.ctx.client.request_range(
+            self.ctx.vehicle, self.ctx.session, self.name, 0, 0, sha256=True, timeout=timeout
+        )
+
+    def prepare(self, remote: FileInfo, complete: bool) -> None:
+        """Decide whether the file is already here, and open or resume its ``.part``."""
+        ctx = self.ctx
+        if complete:
+            self._digest = self._ask_digest(remote.size)
+        if (
+            complete
+            and self.final.is_file()
+            and not self.part.part.exists()
+            and self.final.stat().st_size == remote.size
+        ):
+            meta = self._digest_result()
+            if meta.sha256 is not None and sha256_file(self.final) == meta.sha256:
+                self.status = "up to date"
+                ctx.progress.advance(ctx.vehicle, remote.size)
+                return
+        resumed = self.part.open()
+        if resumed and complete:
+            meta = self._digest_result()
+            if not self.part.remember(
+                size=meta.size, mtime=meta.mtime, complete=True, sha256=meta.sha256
+            ):
+                self.part.reset()  # another version of the file than the one we began
+                resumed = 0
+            self._digest = self._ask_digest(meta.size)
+        self._verify_tail = resumed > 0
+        ctx.progress.advance(ctx.vehicle, resumed)
+
+    def _digest_result(self) -> FileMeta:
+        pending, self._digest = self._digest, None
+
+        def attempt() -> FileMeta:
+            nonlocal pending
+            current = pending if pending is not None else self._ask_digest(self.part.size)
+            pending = None  # a reply is read once; a retry asks again
+            return current.result()[1]
+
+        return self._retrying(attempt, "the sha256")
+
+    # -- transfer
+
+    def _retrying(self, call: Callable[[], FileMeta], what: str) -> FileMeta:
+        deadline = time.monotonic() + self.ctx.retry_for
+        delay = 0.25
+        while True:
+            try:
+                return call()
+            except TransientQueryError as err:
+                if time.monotonic() + delay > deadline or self.ctx.cancel.is_set():
+                    msg = (
+                        f"{err} (while fetching {what} of {self.ctx.session}/{self.name};"
+                        " the same command resumes the download)"
+                    )
+                    raise QueryError(msg) from None
+                time.sleep(delay)
+                delay = min(2.0, delay * 2)
+
+    def pull(self, target: int) -> None:
+        """Fetch until the ``.part`` holds ``target`` bytes (or what the file has, if less)."""
+        if self.status:
+            return
+        deadline = time.monotonic() + self.ctx.retry_for
+        delay = 0.25
+        restarts = 0
+        while True:
+            try:
+                self._pull(target)
+                return
+            except _Restart:
+                restarts += 1
+                if restarts > 3:
+                    msg = f"{self.ctx.session}/{self.name} keeps changing on the vehicle"
+                    raise QueryError(msg) from None
+                self.part.reset()
+            except TransientQueryError as err:
+                if time.monotonic() + delay > deadline or self.ctx.cancel.is_set():
+                    msg = (
+                        f"{err} (at byte {self.part.size} of {self.ctx.session}/{self.name};"
+                        " the same command resumes the download)"
+                    )
+                    raise QueryError(msg) from None
+                time.sleep(delay)
+                delay = min(2.0, delay * 2)
+            else:  # pragma: no cover - _pull returns or raises
+                return
+
+    def _pull(self, target: int) -> None:
+        ctx, part = self.ctx, self.part
+        start = part.size
+        overlap = min(OVERLAP, start) if self._verify_tail else 0
+        cursor = start - overlap
+        inflight: deque[PendingRange] = deque()
+        end = target
+        while True:
+            if ctx.cancel.is_set():
+                msg = "the fetch was interrupted; the same command resumes it"
+                raise QueryError(msg)
+            while len(inflight) < ctx.window and cursor < end:
+                length = min(ctx.chunk, end - cursor)
+                ctx.limit.wait(length)
+                inflight.append(
+                    ctx.client.request_range(ctx.vehicle, ctx.session, self.name, cursor, length)
+                )
+                cursor += length
+            if not inflight:
+                return
+            pending = inflight.popleft()
+            if pending.offset >= end:
+                # Asked for before the file turned out shorter: nothing there to take.
+                with contextlib.suppress(QueryError):
+                    pending.result()
+                continue
+            try:
+                data, meta = pending.result()
+            except TransientQueryError:
+                raise
+            except QueryError:
+                if self._remote_size() < pending.offset:
+                    raise _Restart from None  # the file shrank: rewritten on the vehicle
+                raise
+            self.meta = meta
+            if pending.offset + pending.length > meta.size:
+                end = min(end, meta.size)  # the file is shorter than the listing said
+            if pending.offset < part.size:
+                seen = part.size - pending.offset
+                if data[:seen] != part.tail(seen):
+                    raise _Restart
+                data = data[seen:]
+                self._verify_tail = False
+            part.append(data)
+            ctx.received += len(data)
+            ctx.progress.advance(ctx.vehicle, len(data))
+
+    def _remote_size(self) -> int:
+        ctx = self.ctx
+        _, meta = ctx.client.read_range(ctx.vehicle, ctx.session, self.name, 0, 0)
+        return meta.size
+
+    def recheck(self) -> None:
+        """Check the end of the ``.part`` against the vehicle's file on the next pull."""
+        self._verify_tail = self.part.size > 0
+
+    # -- end
+
+    def finish(self) -> None:
+        """The session is complete: fetch any rest, verify the sha256, rename."""
+        if self.status:
+            return
+        meta = self._digest_result()
+        if meta.sha256 is None:
+            self.keep()  # not complete after all (the session was reopened?)
+            return
+        if self.part.size < meta.size:
+            self.pull(meta.size)
+        self.part.remember(size=meta.size, mtime=meta.mtime, complete=True, sha256=meta.sha256)
+        if self.part.size != meta.size or self.part.digest() != meta.sha256:
+            # What we hold is not the vehicle's file: fetch it once more from scratch.
+            self.part.reset()
+            self._verify_tail = False
+            self.pull(meta.size)
+        try:
+            self.part.commit(meta.sha256)
+        except StorageError as err:
+            msg = f"vehicle {self.ctx.vehicle}: {err}"
+            raise QueryError(msg) from None
+        self.status = "fetched"
+
+    def keep(self) -> None:
+        """Leave the ``.part`` for later (the session is still being written)."""
+        if not self.status:
+            self.part.close()
+            self.status = "partial"
+
+    def outcome(self) -> FileOutcome:
+        """Return what happened to the file."""
+        size = self.part.size
+        if self.status == "up to date":
+            size = self.final.stat().st_size
+        return FileOutcome(self.name, size, self.status or "failed")
+
+    def abandon(self) -> None:
+        """Close the ``.part`` after a failure; it stays for the next run."""
+        if not self.status:
+            self.part.close()
+
+
+def fetch_session(
+    client: FleetClient,
+    vehicle: str,
+    session: str,
+    out_dir: Path,
+    *,
+    follow: bool = False,
+    progress: Progress | None = None,
+    window: int = WINDOW,
+    chunk: int = DEFAULT_RANGE,
+    poll: float = POLL,
+    retry_for: float = RETRY_FOR,
+    max_rate: float | None = None,
+    cancel: threading.Event | None = None,
+) -> FetchOutcome:
+    """Download a session of a vehicle into ``out_dir/<session>/``.
+
+    Args:
+        client: the fleet client.
+        vehicle: the vehicle.
+        session: the session's name.
+        out_dir: where the session directory goes.
+        follow: keep fetching a session that is being written until it completes.
+        progress: receives byte counts.
+        window: ranges in flight.
+        chunk: bytes per range.
+        poll: seconds between looks at a followed session.
+        retry_for: seconds to keep retrying a vehicle that stopped answering.
+        max_rate: bytes per second at most (a thin radio link), or None.
+        cancel: set it to stop the fetch; the ``.part`` files stay.
+
+    Returns:
+        What was fetched.
+
+    Raises:
+        QueryError: the vehicle refused a request, or stopped answering for ``retry_for``
+            seconds; the files fetched so far are kept for the next run.
+        StorageError: the local files cannot be written.
+    """
+    check_component(session, "session")
+    started = time.monotonic()
+    outcome = FetchOutcome(vehicle, session, out_dir / session)
+    ctx = _Context(
+        client,
+        vehicle,
+        session,
+        progress or Progress(),
+        max(1, window),
+        chunk,
+        retry_for,
+        _RateLimit(max_rate),
+        cancel or threading.Event(),
+    )
+    transfers: dict[str, _Transfer] = {}
+    try:
+        while True:
+            info = client.session(vehicle, session, brief=True)
+            ctx.progress.total(vehicle, info.size)
+            for remote in info.files:
+                transfer = transfers.get(remote.name)
+                if transfer is None:
+                    transfer = _Transfer(ctx, remote, outcome.directory / remote.name)
+                    transfers[remote.name] = transfer
+                    transfer.prepare(remote, info.complete)
+                transfer.pull(remote.size)
+            if info.complete:
+                for transfer in transfers.values():
+                    transfer.finish()
+                outcome.complete = True
+                break
+            if not follow:
+                for transfer in transfers.values():
+                    transfer.keep()
+                break
+            for transfer in transfers.values():
+                transfer.recheck()  # a followed file is checked against the vehicle's each poll
+            if ctx.cancel.wait(poll):
+                msg = "the fetch was interrupted; the same command resumes it"
+                raise QueryError(msg)
+    finally:
+        for transfer in transfers.values():
+            transfer.abandon()
+        outcome.received = ctx.received
+        outcome.seconds = time.monotonic() - started
+        outcome.files = [t.outcome() for t in transfers.values()]
+    return outcome

@@ -1,0 +1,228 @@
+"""Queryables and queries as fleetlog's services use them, with ZError translated.
+
+The query services (:mod:`fleetlog.query`) see plain strings and bytes: an
+:class:`IncomingQuery` to answer, :class:`ReplyItem` objects to read. Zenoh stays here.
+
+**Queryables deliver into a FIFO channel drained by a thread of their own**
+(:class:`ServiceQueryable`), not into a Python callback: a callback runs on Zenoh's network
+thread and needs the GIL, so while a worker holds the GIL (a grep) every query would stall the
+link that also carries the recorder's samples. The channel's ``recv`` waits without the GIL.
+The handler is read through ``queryable.handler``: a thread blocked in ``queryable.recv()``
+holds a borrow that makes ``undeclare()`` fail ("Already borrowed"), while one blocked on the
+handler is released by ``undeclare()`` with a ZError ("channel is empty and closed").
+
+**Queries** ask for every reply (``ConsolidationMode.NONE``): a grep or a session listing
+answers with several replies on one key, which the default consolidation would merge away.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import logging
+import threading
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from typing import TypeAlias
+
+import zenoh
+
+from fleetlog.errors import TransportError
+from fleetlog.transport.session import translate_zerror
+
+__all__ = [
+    "IncomingQuery",
+    "LivelinessToken",
+    "PendingQuery",
+    "ReplyItem",
+    "ServiceQueryable",
+    "ZenohSession",
+    "declare_token",
+    "start_query",
+]
+
+#: the session type, for modules that must name it without importing zenoh
+ZenohSession: TypeAlias = zenoh.Session
+
+_log = logging.getLogger("fleetlog.transport.queries")
+_ENCODINGS: dict[str, zenoh.Encoding] = {}
+
+
+def _encoding(name: str) -> zenoh.Encoding:
+    found = _ENCODINGS.get(name)
+    if found is None:
+        found = _ENCODINGS[name] = zenoh.Encoding(name)
+    return found
+
+
+class IncomingQuery:
+    """A query received by a :class:`ServiceQueryable`.
+
+    Attributes:
+        key: the query's key expression (it may hold wildcards).
+        parameters: the selector's parameters, as sent.
+    """
+
+    __slots__ = ("_query", "key", "parameters")
+
+    def __init__(self, query: zenoh.Query) -> None:
+        self._query = query
+        self.key = str(query.key_expr)
+        self.parameters = str(query.parameters)
+
+    @property
+    def selector(self) -> str:
+        """The key and parameters, for logs."""
+        return f"{self.key}?{self.parameters}" if self.parameters else self.key
+
+    def reply(
+        self, key: str, payload: bytes, *, encoding: str, attachment: bytes | None = None
+    ) -> None:
+        """Send one reply on ``key`` (a concrete key that the query's key intersects).
+
+        Raises:
+            TransportError: the reply could not be sent (the querier is gone).
+        """
+        with translate_zerror(f"reply on {key!r}"):
+            self._query.reply(key, payload, encoding=_encoding(encoding), attachment=attachment)
+
+    def reply_err(self, message: str) -> None:
+        """Send an error reply; a querier that is gone is not an error."""
+        with contextlib.suppress(zenoh.ZError, RuntimeError):
+            self._query.reply_err(message)
+
+    def finish(self) -> None:
+        """Tell the querier no more replies come (without it, it waits for its timeout)."""
+        with contextlib.suppress(zenoh.ZError, RuntimeError):
+            self._query.drop()
+
+
+class ServiceQueryable:
+    """A queryable whose queries reach ``on_query`` from a dispatcher thread of its own.
+
+    ``on_query`` must return quickly (hand the query to a worker) and finish every query it
+    takes, one way or another.
+
+    Args:
+        session: the session.
+        key: the key expression served.
+        on_query: receives each query.
+        capacity: queries the channel holds before Zenoh waits.
+
+    Raises:
+        TransportError: Zenoh refused the declaration.
+    """
+
+    def __init__(
+        self,
+        session: zenoh.Session,
+        key: str,
+        on_query: Callable[[IncomingQuery], None],
+        capacity: int = 256,
+    ) -> None:
+        self.key = key
+        with translate_zerror(f"queryable {key!r}"):
+            self._queryable = session.declare_queryable(key, zenoh.handlers.FifoChannel(capacity))
+        self._on_query = on_query
+        self._thread = threading.Thread(
+            target=self._run,
+            args=(self._queryable.handler,),
+            name=f"fleetlog-queryable-{key.rsplit('/', 2)[-2]}",
+            daemon=True,
+        )
+        self._thread.start()
+
+    def _run(self, handler: zenoh.handlers.Handler[zenoh.Query]) -> None:
+        while True:
+            try:
+                query = handler.recv()
+            except zenoh.ZError:
+                return  # undeclared: the channel is closed
+            incoming = IncomingQuery(query)
+            try:
+                self._on_query(incoming)
+            except Exception:  # the dispatcher must outlive any one query
+                _log.exception("handing over query %s failed", incoming.selector)
+                incoming.reply_err("internal error: the query could not be handled")
+                incoming.finish()
+
+    def undeclare(self, timeout: float = 2.0) -> None:
+        """Stop receiving queries and end the dispatcher thread."""
+        with contextlib.suppress(zenoh.ZError, RuntimeError):
+            self._queryable.undeclare()
+        self._thread.join(timeout)
+
+
+class LivelinessToken:
+    """A declared liveliness token ("this service is up")."""
+
+    def __init__(self, session: zenoh.Session, key: str) -> None:
+        with translate_zerror(f"liveliness token {key!r}"):
+            self._token = session.liveliness().declare_token(key)
+
+    def undeclare(self) -> None:
+        """Withdraw the token."""
+        with contextlib.suppress(zenoh.ZError, RuntimeError):
+            self._token.undeclare()
+
+
+def declare_token(session: zenoh.Session, key: str) -> LivelinessToken:
+    """Declare a liveliness token.
+
+    Raises:
+        TransportError: Zenoh refused the declaration.
+    """
+    return LivelinessToken(session, key)
+
+
+@dataclass(frozen=True, slots=True)
+class ReplyItem:
+    """One reply to a query: a sample (``error`` None) or an error reply.
+
+    Attributes:
+        key: the reply's key (empty for an error reply).
+        payload: the sample's payload (empty for an error reply).
+        attachment: the sample's attachment, if any.
+        error: the error reply's text.
+    """
+
+    key: str
+    payload: bytes
+    attachment: bytes | None = None
+    error: str | None = None
+
+
+class PendingQuery:
+    """A query in flight; iterate it for its replies (it ends when the query does)."""
+
+    def __init__(self, session: zenoh.Session, selector: str, timeout: float) -> None:
+        self.selector = selector
+        with translate_zerror(f"query {selector!r}"):
+            self._handler = session.get(
+                selector, consolidation=zenoh.ConsolidationMode.NONE, timeout=timeout
+            )
+
+    def __iter__(self) -> Iterator[ReplyItem]:
+        try:
+            for reply in self._handler:
+                sample = reply.ok
+                if sample is not None:
+                    attachment = sample.attachment
+                    yield ReplyItem(
+                        str(sample.key_expr),
+                        sample.payload.to_bytes(),
+                        None if attachment is None else attachment.to_bytes(),
+                    )
+                elif reply.err is not None:
+                    yield ReplyItem("", b"", None, reply.err.payload.to_string())
+        except zenoh.ZError as err:
+            msg = f"query {self.selector!r} failed: {err}"
+            raise TransportError(msg) from err
+
+
+def start_query(session: zenoh.Session, selector: str, *, timeout: float) -> PendingQuery:
+    """Send a query without waiting for its replies.
+
+    Raises:
+        TransportError: the query could not be sent.
+    """
+    return PendingQuery(session, selector, timeout)
