@@ -1,0 +1,104 @@
+"""``fleetlog serve``: serve a log root's sessions without recording (old or foreign logs)."""
+
+from __future__ import annotations
+
+import signal
+import socket
+import sys
+import threading
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from fleetlog.cli.app import app
+from fleetlog.cli.options import (
+    Config,
+    Connect,
+    Listen,
+    Mode,
+    NoScouting,
+    Root,
+    checked_root,
+    session_options,
+)
+from fleetlog.errors import UsageError
+from fleetlog.query.server import LogServer
+from fleetlog.storage.catalog import LogCatalog
+from fleetlog.transport.session import open_session
+
+__all__ = ["serve"]
+
+
+@app.command()
+def serve(
+    log_root: Annotated[
+        Path,
+        typer.Argument(
+            metavar="LOGROOT", help="Directory holding the session directories.", show_default=False
+        ),
+    ],
+    vehicle: Annotated[
+        str | None,
+        typer.Option(
+            "--vehicle",
+            "-v",
+            help="Vehicle to serve as [default: the community that wrote the latest session,"
+            " else the host name].",
+        ),
+    ] = None,
+    hint: Annotated[
+        Path | None,
+        typer.Option(
+            "--hint",
+            metavar="FILE",
+            help="The .LastOpenedMOOSLogDirectory file naming the latest session"
+            " [default: the one in LOGROOT, else in its parent].",
+        ),
+    ] = None,
+    root: Root = "fleet",
+    mode: Mode = None,
+    connect: Connect = None,
+    listen: Listen = None,
+    config: Config = None,
+    no_multicast_scouting: NoScouting = False,
+) -> None:
+    """Serve the MOOS log sessions under LOGROOT to the shore, as a recorder does.
+
+    Works on directories written by real pLogger as well as by fleetlog. Stop it with Ctrl-C
+    or SIGTERM.
+    """
+    key_root = checked_root(root)
+    zopts = session_options(mode, connect, listen, config, no_multicast_scouting)
+    if not log_root.is_dir():
+        msg = f"log root {log_root} is not a directory"
+        raise UsageError(msg)
+    if hint is not None and not hint.is_file():
+        msg = f"hint file {hint} does not exist"
+        raise UsageError(msg)
+    catalog = LogCatalog(log_root, vehicle="", hint=hint)
+    name = vehicle or catalog.guess_vehicle() or socket.gethostname().split(".")[0] or "vehicle"
+    catalog.vehicle = name
+    stop = threading.Event()
+
+    def on_signal(signum: int, frame: object) -> None:
+        stop.set()
+
+    signal.signal(signal.SIGINT, on_signal)
+    signal.signal(signal.SIGTERM, on_signal)
+    session = open_session(zopts)
+    try:
+        with LogServer(session, catalog, root=key_root, announce=True):
+            sessions = catalog.session_names()
+            latest = catalog.latest()
+            print(
+                f"fleetlog: serving {log_root} as vehicle {name!r}: {len(sessions)} session(s),"
+                f" latest {latest.session or '-'} ({latest.how}) (Ctrl-C to stop)",
+                file=sys.stderr,
+                flush=True,
+            )
+            while not stop.wait(0.5):
+                pass
+    finally:
+        session.close()
+    print("fleetlog: stopped serving", file=sys.stderr)

@@ -1,0 +1,103 @@
+"""How the query commands show vehicles, sessions and transfers: rich tables and figures."""
+
+from __future__ import annotations
+
+import datetime as dt
+import sys
+
+from rich.console import Console
+from rich.table import Table
+
+from fleetlog.wire.query import LatestInfo, SessionInfo
+
+__all__ = [
+    "console",
+    "err_console",
+    "fleet_table",
+    "human_duration",
+    "human_size",
+    "human_time",
+    "sessions_table",
+]
+
+
+def console() -> Console:
+    """The console for results (stdout); plain text when not a terminal.
+
+    Piped output gets a wide page, so a script never sees a session name cut short.
+    """
+    wide = None if sys.stdout.isatty() else 400
+    return Console(highlight=False, width=wide)
+
+
+def err_console() -> Console:
+    """The console for progress and notes (stderr)."""
+    return Console(stderr=True, highlight=False)
+
+
+def human_size(size: int) -> str:
+    """``1536`` → ``1.5 KiB``."""
+    value = float(size)
+    for unit in ("B", "KiB", "MiB", "GiB"):
+        if value < 1024 or unit == "GiB":
+            return f"{value:.0f} {unit}" if unit == "B" else f"{value:.1f} {unit}"
+        value /= 1024
+    return f"{value:.1f} TiB"  # pragma: no cover - the loop returns
+
+
+def human_duration(seconds: float | None) -> str:
+    """``3725.2`` → ``1:02:05``; None → ``-``."""
+    if seconds is None:
+        return "-"
+    total = round(max(seconds, 0.0))
+    hours, rest = divmod(total, 3600)
+    minutes, secs = divmod(rest, 60)
+    return f"{hours}:{minutes:02d}:{secs:02d}"
+
+
+def human_time(epoch: float | None) -> str:
+    """LOGSTART as ``2025-06-19 12:04:50Z`` (UTC); ``-`` without one or out of range."""
+    if epoch is None:
+        return "-"
+    try:
+        when = dt.datetime.fromtimestamp(epoch, dt.UTC)
+    except (OverflowError, OSError, ValueError):
+        return "-"  # a warped LOGSTART (MOOSTimeWarp) is not an epoch
+    return when.strftime("%Y-%m-%d %H:%M:%SZ")
+
+
+def fleet_table(vehicles: dict[str, set[str]], latest: dict[str, LatestInfo]) -> Table:
+    """The ``fleetlog fleet`` table: each vehicle up, what it runs, its latest session."""
+    table = Table(box=None, pad_edge=False)
+    for column in ("VEHICLE", "UP", "LATEST SESSION", "STATE", "STARTED"):
+        table.add_column(column, no_wrap=True)
+    for vehicle in sorted(vehicles):
+        info = latest.get(vehicle)
+        services = ",".join(sorted(vehicles[vehicle]))
+        if info is None:
+            table.add_row(vehicle, services, "(does not serve its logs)", "-", "-")
+        elif info.session is None:
+            table.add_row(vehicle, services, "(no session)", "-", "-")
+        else:
+            state = "writing" if info.writing else "complete"
+            table.add_row(vehicle, services, info.session, state, human_time(info.start))
+    return table
+
+
+def sessions_table(sessions: list[SessionInfo], latest: str | None) -> Table:
+    """The ``fleetlog sessions V`` table, oldest first; the latest marked ``*``."""
+    table = Table(box=None, pad_edge=False)
+    for column in ("", "SESSION", "STARTED", "DURATION", "VARS", "FILES", "SIZE", "STATE"):
+        table.add_column(column, no_wrap=True)
+    for info in sessions:
+        table.add_row(
+            "*" if info.name == latest else "",
+            info.name,
+            human_time(info.start),
+            human_duration(info.duration),
+            "-" if info.variables is None else str(info.variables),
+            str(len(info.files)),
+            human_size(info.size),
+            "complete" if info.complete else "writing",
+        )
+    return table
