@@ -1,4 +1,4 @@
-"""The Python API for vehicle apps: publish MOOS variables that fleetlog records.
+r"""The Python API for vehicle apps: publish MOOS variables that fleetlog records.
 
 Example::
 
@@ -7,7 +7,7 @@ Example::
     with Vehicle("alpha", source="iGPS") as v:
         v.publish("NAV_X", 12.5)
         v.publish("DEPLOY", "true")
-        v.publish("CAMERA_FRAME", b"\\x00\\x01")
+        v.publish("CAMERA_FRAME", b"\x00\x01")
         v.confirm()          # wait until the vehicle's recorder has received them
 
 Publishing uses Zenoh's BLOCK congestion control: a publisher slows down rather than lose
@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import time
 from types import TracebackType
+from typing import Any
 
 import zenoh
 
@@ -45,6 +46,16 @@ def find_recorder(session: zenoh.Session, root: str = DEFAULT_ROOT, timeout: flo
         msg = f"several recorders are reachable ({', '.join(vehicles)}); choose one with --vehicle"
         raise QueryError(msg)
     return vehicles[0]
+
+
+def _matching(pub: zenoh.Publisher) -> bool:
+    """Whether a subscriber matches the publisher's key.
+
+    zenoh's stub says ``matching_status`` is a bool, but at run time it is a MatchingStatus,
+    which is always truthy: read its ``matching`` field.
+    """
+    status: Any = pub.matching_status
+    return bool(getattr(status, "matching", status))
 
 
 class Vehicle:
@@ -103,7 +114,7 @@ class Vehicle:
         pub = self.session.declare_publisher(key)
         try:
             deadline = time.monotonic() + timeout
-            while not pub.matching_status:
+            while not _matching(pub):
                 if time.monotonic() > deadline:
                     return False
                 time.sleep(0.005)

@@ -657,6 +657,23 @@ def test_poke_without_a_recorder_fails_in_one_line(tmp_path: Path, cli_env: dict
     assert done.stderr == (
         "fleetlog: error: no fleetlog recorder is reachable; name the vehicle with --vehicle\n"
     )
+    # with a vehicle named, poke waits for a subscriber, then says nothing was delivered
+    done = poke(nobody, tmp_path, cli_env, "NAV_X=1", "--vehicle", "ghost", "--wait", "0.5")
+    assert done.returncode == 1
+    assert done.stderr == (
+        "fleetlog: error: nobody subscribes to NAV_X of vehicle 'ghost'; nothing was delivered\n"
+    )
+
+
+def test_api_waits_for_a_subscriber(record: Callable[..., Recorder], endpoint: str) -> None:
+    options = SessionOptions(listen=(endpoint,), multicast_scouting=False)
+    with Vehicle("alpha", source="iTest", options=options) as v:
+        assert not v.wait_for_subscriber("NAV_X", timeout=0.2)  # no recorder yet
+        rec = record("--vehicle", "alpha", "-e", endpoint, listen=f"tcp/127.0.0.1:{free_port()}")
+        assert v.wait_for_subscriber("NAV_X", timeout=10.0)
+        v.publish("NAV_X", 1.0)
+        assert v.confirm(timeout=10.0)
+    assert rec.stop() == 0
 
 
 def test_poke_names_several_recorders(
