@@ -11,7 +11,16 @@ import typer
 
 from fleetlog.api import Vehicle
 from fleetlog.cli.app import app
-from fleetlog.cli.options import Config, Connect, Listen, Mode, NoScouting, Root, checked_root, session_options
+from fleetlog.cli.options import (
+    Config,
+    Connect,
+    Listen,
+    Mode,
+    NoScouting,
+    Root,
+    checked_root,
+    session_options,
+)
 from fleetlog.errors import QueryError, UsageError
 
 __all__ = ["parse_assignment", "poke"]
@@ -55,11 +64,18 @@ def poke(
     ],
     vehicle: Annotated[
         str | None,
-        typer.Option("--vehicle", "-v", help="Vehicle to publish to [default: the one reachable recorder's]."),
+        typer.Option(
+            "--vehicle", "-v", help="Vehicle to publish to [default: the one reachable recorder's]."
+        ),
     ] = None,
-    source: Annotated[str, typer.Option("--source", help="Source process name to publish as.")] = "uPokeDB",
+    source: Annotated[
+        str, typer.Option("--source", help="Source process name to publish as.")
+    ] = "uPokeDB",
     wait: Annotated[
-        float, typer.Option("--wait", help="Seconds to wait for a subscriber and for the recorder's confirmation.")
+        float,
+        typer.Option(
+            "--wait", help="Seconds to wait for a subscriber and for the recorder's confirmation."
+        ),
     ] = 3.0,
     root: Root = "fleet",
     mode: Mode = None,
