@@ -37,7 +37,7 @@ from concurrent.futures import Future
 from dataclasses import dataclass, field
 
 from fleetlog.errors import ReplayError, StorageError
-from fleetlog.moos.alog import split_source
+from fleetlog.moos.alog import BinaryRef, split_source
 from fleetlog.replayer.clock import Clock
 from fleetlog.replayer.control import (
     Command,
@@ -54,8 +54,8 @@ from fleetlog.replayer.control import (
 from fleetlog.replayer.filters import EntryFilter, FilterSpec
 from fleetlog.replayer.inputs import ReplayInput
 from fleetlog.replayer.report import Lateness, State, Status, Summary, VehicleCounts
-from fleetlog.replayer.schedule import DEFAULT_WINDOW, Item, Schedule
-from fleetlog.wire.message import MoosMessage
+from fleetlog.replayer.schedule import DEDUPE_MEMORY, DEFAULT_WINDOW, Item, Schedule
+from fleetlog.wire.message import Kind, MoosMessage
 
 __all__ = ["DB_TIME_SOURCE", "MAX_CHOKE_TIME", "TICK", "PlayOptions", "Player", "Publish"]
 
@@ -69,6 +69,11 @@ _MAX_ERRORS = 5
 
 #: How the player publishes: ``publish(vehicle, message)``.
 Publish = Callable[[str, MoosMessage], None]
+#: ``prepare(vehicle, variable, kind)``: get ready to publish it (declare its publisher), so
+#: the first publication of a variable is not late by the declaration's cost.
+Prepare = Callable[[str, str, Kind], None]
+#: Slack kept before a due entry when preparing the ones after it, seconds.
+_PREPARE_SLACK = 0.002
 
 
 @dataclass(frozen=True)
@@ -87,6 +92,7 @@ class PlayOptions:
             vehicles.
         window: each input's re-sort window, in records.
         dedupe: drop re-delivered duplicates.
+        dedupe_memory: how many recent entries the duplicate check remembers.
         db_time: post PLAYBACK_DB_TIME.
         choke_time: PLAYBACK_CHOKE's limit on the heartbeat's age, seconds.
     """
@@ -100,6 +106,7 @@ class PlayOptions:
     prefix: str = ""
     window: int = DEFAULT_WINDOW
     dedupe: bool = True
+    dedupe_memory: int = DEDUPE_MEMORY
     db_time: bool = True
     choke_time: float = MAX_CHOKE_TIME
 
@@ -127,6 +134,8 @@ class Player:
         publish: called for every message, with the vehicle to publish under.
         clock: the clock to pace by.
         options: how to play.
+        prepare: called once per vehicle, variable and type before its first publication,
+            while the player has time to spare (at the start, or waiting for an entry).
     """
 
     def __init__(
@@ -135,6 +144,7 @@ class Player:
         publish: Publish,
         clock: Clock,
         options: PlayOptions | None = None,
+        prepare: Prepare | None = None,
     ) -> None:
         if not inputs:
             msg = "nothing to replay"
@@ -143,6 +153,8 @@ class Player:
         self.options.check()
         self.inputs = inputs
         self._publish = publish
+        self._prepare = prepare
+        self._prepared: set[tuple[str, str, Kind]] = set()
         self._clock = clock
         self._filter = EntryFilter(self.options.filters)
         self.vehicles = [self.options.prefix + item.vehicle for item in inputs]
@@ -251,8 +263,9 @@ class Player:
     def _open(self, at: float) -> None:
         """Start a new pass and skip to ``at`` (without publishing)."""
         self._close_schedule()
+        opt = self.options
         self._schedule = Schedule(
-            self.inputs, window=self.options.window, dedupe=self.options.dedupe
+            self.inputs, window=opt.window, dedupe=opt.dedupe, memory=opt.dedupe_memory
         )
         self._next = next(self._schedule, None)
         self._consumed = -float("inf")
@@ -294,6 +307,10 @@ class Player:
             self._open(self._begin)
             if self.options.start is None and self._next is not None:
                 self._begin = self._next.time
+            if self.options.db_time:
+                for vehicle in dict.fromkeys(self.vehicles):
+                    self._prepare_once(vehicle, "PLAYBACK_DB_TIME", Kind.DOUBLE)
+            self._prepare_ahead(None)
             with self._lock:
                 self._set_anchor(self._begin)
             self._play()
@@ -333,6 +350,9 @@ class Player:
             if self._rate is not None and not item.late:
                 due = self._due(item.time)
                 now = clock.now()
+                if now < due and self._prepare is not None:
+                    self._prepare_ahead(due)
+                    now = clock.now()
                 if now < due:
                     # Wake when the heartbeat turns stale too, so a choke stops the
                     # position where uPlayBack's tick would have, not at the next entry.
@@ -352,6 +372,35 @@ class Player:
         self._slot = -1
         return True
 
+    def _prepare_once(self, vehicle: str, name: str, kind: Kind) -> None:
+        if self._prepare is None:
+            return
+        sig = (vehicle, name, kind)
+        if sig not in self._prepared:
+            if len(self._prepared) > 65536:
+                self._prepared.clear()
+            self._prepared.add(sig)
+            self._prepare(vehicle, name, kind)
+
+    def _prepare_ahead(self, due: float | None) -> None:
+        """Prepare the next entries' publishers, keeping clear of ``due``."""
+        if self._prepare is None or self._schedule is None:
+            return
+        clock = self._clock
+        upcoming = [self._next] if self._next is not None else []
+        for item in (*upcoming, *self._schedule.ahead):
+            if due is not None and clock.now() > due - _PREPARE_SLACK:
+                return
+            value = item.entry.value
+            kind = (
+                Kind.DOUBLE
+                if isinstance(value, float)
+                else Kind.STRING
+                if isinstance(value, str)
+                else Kind.BINARY
+            )
+            self._prepare_once(self.vehicles[item.origin], item.entry.key, kind)
+
     def _choke_deadline(self, now: float) -> float:
         heartbeat = self._heartbeat
         if heartbeat is None:
@@ -361,6 +410,8 @@ class Player:
 
     def _choked(self) -> bool:
         heartbeat = self._heartbeat
+        if heartbeat is None and self._state is State.PLAYING:
+            return False  # no client: the per-entry fast path, without the lock
         choked = heartbeat is not None and self._clock.wall() - heartbeat > self.options.choke_time
         with self._lock:
             if choked and self._state is State.PLAYING:
@@ -385,8 +436,10 @@ class Player:
         assert self._schedule is not None
         vehicle = self.vehicles[item.origin]
         entry = item.entry
+        value: float | str | bytes
         try:
-            value = self._schedule.payload(item)
+            raw = entry.value
+            value = self._schedule.payload(item) if isinstance(raw, BinaryRef) else raw
         except StorageError as err:
             self._counts[vehicle].unplayable += 1
             if len(self._errors) < _MAX_ERRORS:
@@ -427,6 +480,8 @@ class Player:
     # -- commands
 
     def _apply_commands(self) -> None:
+        if self._commands.empty():  # the common case, checked without an exception
+            return
         while True:
             try:
                 command, future = self._commands.get_nowait()

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import cast
 
-from fleetlog.errors import FleetlogError, FormatError, ReplayError, StorageError
+from fleetlog.errors import FormatError, ReplayError, StorageError
 from fleetlog.moos.alog import BANNER_RULE, iter_entries
 from fleetlog.moos.mission import parse_mission
 from fleetlog.storage.readers import AlogReader, Errors, find_alog, open_text
@@ -143,8 +143,6 @@ def _db_time_community(reader: AlogReader) -> str | None:
                 community = entry.source[len("MOOSDB_") :]
                 if community:
                     return community
-    except FleetlogError:
-        return None  # a bad line later in the file is for the replay pass to report
     finally:
         close = getattr(entries, "close", None)
         if close is not None:
@@ -153,7 +151,13 @@ def _db_time_community(reader: AlogReader) -> str | None:
 
 
 def detect_vehicle(reader: AlogReader) -> tuple[str, str] | None:
-    """Return ``(vehicle, how)`` for an alog from its DB_TIME lines or its ``._moos``."""
+    """Return ``(vehicle, how)`` for an alog from its DB_TIME lines or its ``._moos``.
+
+    Raises:
+        FormatError: (a ``"raise"`` reader) a malformed line among the entries scanned;
+            better said now, naming the file and line, than as "no vehicle".
+        StorageError: the alog cannot be read.
+    """
     community = _db_time_community(reader)
     if community is not None:
         return community, "DB_TIME"

@@ -36,6 +36,8 @@ __all__ = ["DEDUPE_MEMORY", "DEFAULT_WINDOW", "Item", "Schedule"]
 DEFAULT_WINDOW = 10_000
 #: How many recent entries the duplicate check remembers.
 DEDUPE_MEMORY = 65_536
+#: Entries read ahead of the one being played, so the player can prepare their publishers.
+LOOKAHEAD = 32
 
 
 class Item(NamedTuple):
@@ -92,6 +94,7 @@ class Schedule:
         self._passes = [self._records(item) for item in inputs]
         self._merge = merge_records(self._passes, window=window)
         self._run = self._items()
+        self._ahead: deque[Item] = deque()
 
     def _records(self, source: ReplayInput) -> Generator[Record, None, None]:
         logstart = source.logstart
@@ -146,10 +149,24 @@ class Schedule:
             yield item
 
     def __iter__(self) -> Iterator[Item]:
-        return self._run
+        return self
 
     def __next__(self) -> Item:
-        return next(self._run)
+        ahead = self._ahead
+        # One read per entry played (all of them at the start), so reading stays smooth.
+        while len(ahead) < LOOKAHEAD:
+            item = next(self._run, None)
+            if item is None:
+                break
+            ahead.append(item)
+        if not ahead:
+            raise StopIteration
+        return ahead.popleft()
+
+    @property
+    def ahead(self) -> deque[Item]:
+        """The entries already read that come next (up to :data:`LOOKAHEAD`); do not modify."""
+        return self._ahead
 
     def payload(self, item: Item) -> float | str | bytes:
         """Return the value to publish: the double, the string, or the bytes from the blog.

@@ -1,0 +1,213 @@
+"""A replay process: inputs opened, a Zenoh session, the player, its control and its status.
+
+The player runs in the calling thread. Zenoh's callback threads deliver PLAYBACK_CHOKE
+heartbeats and control queries to it; a small thread publishes the status a few times a
+second. At the end, the service makes sure the recorders got everything before the session
+closes (a short-lived publisher loses its tail otherwise).
+"""
+
+from __future__ import annotations
+
+import sys
+import threading
+from collections.abc import Callable, Mapping, Sequence
+from concurrent.futures import TimeoutError as FutureTimeout
+from dataclasses import dataclass, field
+from typing import Any
+
+from fleetlog.errors import ReplayError
+from fleetlog.replayer.clock import Clock, RealClock
+from fleetlog.replayer.control import parse_query
+from fleetlog.replayer.engine import Player, PlayOptions
+from fleetlog.replayer.inputs import ReplayInput, open_inputs
+from fleetlog.replayer.report import Summary
+from fleetlog.storage.readers import Errors
+from fleetlog.transport.replay import ReplayLink
+from fleetlog.transport.session import SessionOptions, open_session
+from fleetlog.wire.message import Kind, MoosMessage
+
+__all__ = ["ReplayConfig", "ReplayService"]
+
+#: Seconds a control query waits for the player to apply its command.
+COMMAND_TIMEOUT = 2.0
+#: The interpreter's thread switch interval while playing (Python's default is 5 ms).
+SWITCH_INTERVAL = 0.001
+
+
+@dataclass
+class ReplayConfig:
+    """Everything a replay process needs.
+
+    Attributes:
+        inputs: alogs and session directories.
+        vehicles: ``--as``: none, one for every input, or one per input.
+        options: how to play; ``start``/``stop`` are seconds from the origin.
+        root: the key root.
+        zenoh: how to open the session.
+        wait: seconds to wait for every vehicle's variables to have a subscriber before
+            playing (a put before that goes nowhere).
+        confirm: seconds to wait, at the end, for each recorder to confirm receipt.
+        status_period: seconds between status publications.
+        errors: the readers' policy for malformed lines (``"raise"`` or ``"skip"``).
+    """
+
+    inputs: Sequence[str]
+    vehicles: Sequence[str] = ()
+    options: PlayOptions = field(default_factory=PlayOptions)
+    root: str = "fleet"
+    zenoh: SessionOptions = field(default_factory=SessionOptions)
+    wait: float = 1.0
+    confirm: float = 5.0
+    status_period: float = 0.25
+    errors: Errors = "raise"
+
+
+class ReplayService:
+    """Runs one replay over Zenoh; see the module docstring.
+
+    Args:
+        config: what to replay and how.
+        clock: the clock to pace by (the real one by default).
+
+    Attributes:
+        inputs: the opened inputs, after :meth:`open`.
+        player: the player, after :meth:`open`.
+        missing: vehicles that had no subscriber when playback began.
+        unconfirmed: vehicles whose recorder did not confirm receipt at the end.
+    """
+
+    def __init__(self, config: ReplayConfig, clock: Clock | None = None) -> None:
+        self.config = config
+        self.clock = clock or RealClock()
+        self.inputs: list[ReplayInput] = []
+        self.player: Player | None = None
+        self.missing: list[str] = []
+        self.unconfirmed: list[str] = []
+        self._link: ReplayLink | None = None
+        self._done = threading.Event()
+
+    def open_inputs(self) -> list[ReplayInput]:
+        """Open the inputs (before any network I/O), once.
+
+        Raises:
+            ReplayError: no inputs, a missing input, an unknown vehicle.
+            StorageError: an input cannot be read.
+            FormatError: an input's banner is garbled (names the file and line).
+        """
+        if not self.inputs:
+            config = self.config
+            self.inputs = open_inputs(config.inputs, config.vehicles, errors=config.errors)
+        return self.inputs
+
+    @property
+    def origin(self) -> float:
+        """The replay's origin: the earliest LOGSTART of the opened inputs."""
+        return min(item.logstart for item in self.open_inputs())
+
+    def open(self, options: PlayOptions | None = None) -> Player:
+        """Open the inputs and build the player.
+
+        Args:
+            options: how to play, instead of the configuration's (for options that depend
+                on the inputs, such as an absolute ``--from``).
+
+        Raises:
+            ReplayError: as :meth:`open_inputs`, or bad options.
+            StorageError: as :meth:`open_inputs`.
+            FormatError: as :meth:`open_inputs`.
+        """
+        inputs = self.open_inputs()
+        try:
+            self.player = Player(
+                inputs, self._publish, self.clock, options or self.config.options, self._prepare
+            )
+        except BaseException:
+            self.close_inputs()
+            raise
+        return self.player
+
+    def _publish(self, vehicle: str, message: MoosMessage) -> None:
+        assert self._link is not None
+        self._link.publish(vehicle, message)
+
+    def _prepare(self, vehicle: str, name: str, kind: Kind) -> None:
+        assert self._link is not None
+        self._link.prepare(vehicle, name, kind)
+
+    def close_inputs(self) -> None:
+        """Close the input files."""
+        for item in self.inputs:
+            item.close()
+
+    def run(self, on_ready: Callable[[Player], None] | None = None) -> Summary:
+        """Open the session, play, confirm delivery; return the summary.
+
+        Args:
+            on_ready: called with the player just before playback starts (to attach a
+                keyboard or a display).
+
+        Raises:
+            TransportError: the session cannot be opened or used.
+            StorageError: an input cannot be read.
+            FormatError: an input has a malformed line (names the file and line).
+        """
+        player = self.player or self.open()
+        try:
+            session = open_session(self.config.zenoh)
+            try:
+                self._link = ReplayLink(session, self.config.root, player.vehicles)
+                try:
+                    return self._play(player, self._link, on_ready)
+                finally:
+                    self._link.close()
+            finally:
+                session.close()
+        finally:
+            self.close_inputs()
+
+    def _play(
+        self, player: Player, link: ReplayLink, on_ready: Callable[[Player], None] | None
+    ) -> Summary:
+        link.on_choke(player.heartbeat)
+        link.serve(self._control, lambda: player.status().to_dict())
+        self.missing = link.wait_for_subscribers(self.config.wait)
+        publisher = threading.Thread(
+            target=self._publish_status, args=(player, link), name="fleetlog-replay-status"
+        )
+        publisher.daemon = True
+        publisher.start()
+        # The player spins before each entry, holding the GIL; a short switch interval lets
+        # the callback and status threads in within a millisecond instead of five.
+        interval = sys.getswitchinterval()
+        sys.setswitchinterval(SWITCH_INTERVAL)
+        try:
+            if on_ready is not None:
+                on_ready(player)
+            link.publish_status(player.status().to_dict())
+            summary = player.run()
+        finally:
+            sys.setswitchinterval(interval)
+            self._done.set()
+            publisher.join()
+        link.publish_status(player.status().to_dict())
+        self.unconfirmed = link.confirm_delivery(self.config.confirm)
+        return summary
+
+    def _control(self, params: Mapping[str, str]) -> dict[str, Any]:
+        player = self.player
+        if player is None:
+            msg = "the replay has not started"
+            raise ReplayError(msg)
+        future = player.submit(parse_query(params))
+        try:
+            doc = future.result(COMMAND_TIMEOUT).to_dict()
+        except FutureTimeout:
+            msg = "the player did not take the command in time"
+            raise ReplayError(msg) from None
+        if self._link is not None:
+            self._link.publish_status(doc)  # a UI following the status sees the change now
+        return doc
+
+    def _publish_status(self, player: Player, link: ReplayLink) -> None:
+        while not self._done.wait(self.config.status_period):
+            link.publish_status(player.status().to_dict())

@@ -1,0 +1,270 @@
+"""The Zenoh side of a replay: publishing, PLAYBACK_CHOKE, the control queryable, the status.
+
+Keys, for each vehicle ``V`` the replay publishes to (after ``--prefix``):
+
+* ``<root>/V/var/VAR``: the replayed variables (docs/wire.md), BLOCK congestion control;
+* ``<root>/V/var/PLAYBACK_CHOKE``: subscribed; a client's heartbeat (a double, its clock's
+  time). Samples that are themselves replays (their attachment carries an original time) are
+  ignored, so replaying a log that holds PLAYBACK_CHOKE never chokes the replay itself;
+* ``<root>/V/@fleetlog/replay/control``: a queryable; ``?cmd=pause`` and so on
+  (:func:`fleetlog.replayer.control.parse_query`), parameters separated by ``;`` (Zenoh's
+  separator) or ``&``. It answers the status after the command as JSON, or an error reply;
+* ``<root>/V/@fleetlog/replay/status``: the status as JSON, published a few times a second
+  and answered to queries.
+
+Every vehicle's control key steers the same replay: the vehicles share one clock.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import re
+import time
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+import zenoh
+
+from fleetlog.errors import FormatError, QueryError, TransportError
+from fleetlog.transport.services import get_replies
+from fleetlog.transport.session import translate_zerror
+from fleetlog.wire.keys import service_key, var_key
+from fleetlog.wire.message import (
+    ENCODINGS,
+    Kind,
+    MoosMessage,
+    decode_attachment,
+    decode_value,
+    encode_attachment,
+    encode_value,
+    kind_of_encoding,
+)
+
+__all__ = ["CHOKE_VARIABLE", "ReplayLink", "parse_parameters"]
+
+#: The variable a client posts its heartbeat to (uPlayBack's PLAYBACK_CHOKE).
+CHOKE_VARIABLE = "PLAYBACK_CHOKE"
+_JSON = zenoh.Encoding("application/json")
+_ENCODINGS = {kind: zenoh.Encoding(text) for kind, text in ENCODINGS.items()}
+#: Declared publishers kept at most (a log with more variables re-declares as it goes).
+_MAX_PUBLISHERS = 4096
+_SEPARATORS = re.compile(r"[;&]")
+
+#: ``handler(parameters) -> status document``; raises a FleetlogError to refuse.
+ControlHandler = Callable[[Mapping[str, str]], dict[str, Any]]
+
+
+def parse_parameters(text: str) -> dict[str, str]:
+    """Split a selector's parameters (``a=1;b=2``, or ``a=1&b=2``) into a dict."""
+    out: dict[str, str] = {}
+    for part in _SEPARATORS.split(text):
+        if part:
+            name, _, value = part.partition("=")
+            out[name.strip()] = value.strip()
+    return out
+
+
+def _matching(pub: zenoh.Publisher) -> bool:
+    # The stubs say bool, the runtime returns a MatchingStatus that is always truthy.
+    status: Any = pub.matching_status
+    return bool(getattr(status, "matching", status))
+
+
+class ReplayLink:
+    """Publishes a replay's messages and serves its control and status over one session.
+
+    Args:
+        session: an open Zenoh session (not closed here).
+        root: the key root.
+        vehicles: the vehicles the replay publishes to.
+    """
+
+    def __init__(self, session: zenoh.Session, root: str, vehicles: Sequence[str]) -> None:
+        self.session = session
+        self.root = root
+        self.vehicles = tuple(dict.fromkeys(vehicles))
+        self._publishers: dict[tuple[str, str, Kind], zenoh.Publisher] = {}
+        self._declared: list[Any] = []
+        self._status_pubs: list[zenoh.Publisher] = []
+
+    # -- data
+
+    # The same puts as MoosPublisher.send (docs/wire.md), plus prepare(): the player declares
+    # a variable's publisher while it waits, not when the entry is due (a declaration costs
+    # about a millisecond, half the timing budget).
+
+    def _publisher(self, vehicle: str, name: str, kind: Kind) -> zenoh.Publisher:
+        sig = (vehicle, name, kind)
+        pub = self._publishers.get(sig)
+        if pub is None:
+            if len(self._publishers) >= _MAX_PUBLISHERS:
+                self._undeclare_publishers()
+            key = var_key(self.root, vehicle, name)
+            with translate_zerror(f"publisher on {key!r}"):
+                pub = self.session.declare_publisher(
+                    key,
+                    encoding=_ENCODINGS[kind],
+                    congestion_control=zenoh.CongestionControl.BLOCK,
+                    reliability=zenoh.Reliability.RELIABLE,
+                )
+            self._publishers[sig] = pub
+        return pub
+
+    def prepare(self, vehicle: str, name: str, kind: Kind) -> None:
+        """Declare the publisher of a variable before its first publication.
+
+        Raises:
+            TransportError: the declaration failed.
+        """
+        self._publisher(vehicle, name, kind)
+
+    def publish(self, vehicle: str, message: MoosMessage) -> None:
+        """Publish one message under ``vehicle`` (BLOCK, reliable).
+
+        Its community defaults to the vehicle, as a live process's would.
+
+        Raises:
+            TransportError: Zenoh refused the put.
+        """
+        kind, payload = encode_value(message.value)
+        attachment = encode_attachment(
+            message.time,
+            message.source,
+            message.aux,
+            message.community or vehicle,
+            message.original_time,
+        )
+        pub = self._publisher(vehicle, message.name, kind)
+        try:
+            pub.put(payload, attachment=attachment)
+        except zenoh.ZError as err:
+            msg = f"could not publish {message.name!r} of {vehicle!r}: {err}"
+            raise TransportError(msg) from err
+
+    def _undeclare_publishers(self) -> None:
+        publishers = list(self._publishers.values())
+        self._publishers.clear()
+        for pub in publishers:
+            with contextlib.suppress(zenoh.ZError):
+                pub.undeclare()
+
+    def wait_for_subscribers(self, timeout: float) -> list[str]:
+        """Wait until every vehicle's variables have a subscriber; return those without one.
+
+        A put made before a subscription is known goes nowhere, so the replay waits (up to
+        ``timeout``) until, for each vehicle, something subscribes to its variables.
+        """
+        pubs = {
+            vehicle: self.session.declare_publisher(var_key(self.root, vehicle, CHOKE_VARIABLE))
+            for vehicle in self.vehicles
+        }
+        try:
+            deadline = time.monotonic() + timeout
+            while True:
+                missing = [v for v, pub in pubs.items() if not _matching(pub)]
+                if not missing or time.monotonic() >= deadline:
+                    return missing
+                time.sleep(0.01)
+        finally:
+            for pub in pubs.values():
+                pub.undeclare()
+
+    def confirm_delivery(self, timeout: float) -> list[str]:
+        """Make sure what was published reached each vehicle's recorder; return the others.
+
+        A query to the vehicle's recorder status travels behind the samples on the same
+        link, so its answer proves the recorder has them. Vehicles without a recorder get
+        a short grace period instead, so plain subscribers are not cut off by the close.
+        """
+        unconfirmed: list[str] = []
+        for vehicle in self.vehicles:
+            try:
+                replies = get_replies(
+                    self.session, service_key(self.root, vehicle, "status"), timeout=timeout
+                )
+            except QueryError:
+                replies = []
+            if not replies:
+                unconfirmed.append(vehicle)
+        if unconfirmed:
+            time.sleep(0.3)
+        return unconfirmed
+
+    # -- PLAYBACK_CHOKE
+
+    def on_choke(self, callback: Callable[[float], None]) -> None:
+        """Call ``callback(client_time)`` for each PLAYBACK_CHOKE heartbeat a client posts.
+
+        Raises:
+            TransportError: the subscription failed.
+        """
+
+        def receive(sample: zenoh.Sample) -> None:
+            kind = kind_of_encoding(str(sample.encoding))
+            found, value, garbled = decode_value(sample.payload.to_bytes(), kind)
+            if garbled or found is not Kind.DOUBLE or not isinstance(value, float):
+                return
+            attachment = sample.attachment
+            if attachment is not None:
+                try:
+                    if decode_attachment(attachment.to_bytes()).original_time is not None:
+                        return  # a replayed heartbeat, maybe our own
+                except FormatError:
+                    pass
+            callback(value)
+
+        for vehicle in self.vehicles:
+            key = var_key(self.root, vehicle, CHOKE_VARIABLE)
+            with translate_zerror(f"subscription to {key!r}"):
+                self._declared.append(self.session.declare_subscriber(key, receive))
+
+    # -- control and status
+
+    def serve(self, control: ControlHandler, status: Callable[[], dict[str, Any]]) -> None:
+        """Declare the control and status queryables of every vehicle.
+
+        Raises:
+            TransportError: a declaration failed.
+        """
+
+        def answer(query: zenoh.Query, document: Callable[[], dict[str, Any]]) -> None:
+            try:
+                doc = document()
+            except Exception as err:  # a refusal, or a bug: either way the query gets an answer
+                query.reply_err(str(err))
+                return
+            query.reply(query.key_expr, json.dumps(doc), encoding=_JSON)
+
+        def on_control(query: zenoh.Query) -> None:
+            params = parse_parameters(str(query.parameters))
+            answer(query, lambda: control(params))
+
+        def on_status(query: zenoh.Query) -> None:
+            answer(query, status)
+
+        for vehicle in self.vehicles:
+            for name, handler in (("control", on_control), ("status", on_status)):
+                key = service_key(self.root, vehicle, "replay", name)
+                with translate_zerror(f"queryable on {key!r}"):
+                    self._declared.append(self.session.declare_queryable(key, handler))
+            key = service_key(self.root, vehicle, "replay", "status")
+            with translate_zerror(f"publisher on {key!r}"):
+                self._status_pubs.append(self.session.declare_publisher(key, encoding=_JSON))
+
+    def publish_status(self, document: dict[str, Any]) -> None:
+        """Publish the status on every vehicle's status key (dropped if nobody keeps up)."""
+        text = json.dumps(document)
+        for pub in self._status_pubs:
+            with contextlib.suppress(zenoh.ZError):
+                pub.put(text)
+
+    def close(self) -> None:
+        """Undeclare everything (the session stays open)."""
+        for pub in self._status_pubs:
+            pub.undeclare()
+        self._status_pubs.clear()
+        for entity in self._declared:
+            entity.undeclare()
+        self._declared.clear()
+        self._undeclare_publishers()
