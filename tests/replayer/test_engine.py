@@ -12,7 +12,7 @@ from replay_support import Line, MakeSession
 from fleetlog.errors import ReplayError
 from fleetlog.replayer.clock import FakeClock
 from fleetlog.replayer.control import Pause, Resume, Seek, SetRate, Step, Stop, Toggle
-from fleetlog.replayer.engine import PlayOptions, Player
+from fleetlog.replayer.engine import Player, PlayOptions
 from fleetlog.replayer.filters import FilterSpec
 from fleetlog.replayer.inputs import ReplayInput, open_inputs
 from fleetlog.replayer.report import State
@@ -99,17 +99,23 @@ def test_entries_are_published_at_their_offsets(make_session: MakeSession, opene
     assert [w for w in h.clock.waits if w is not None] == [0.5, 2.0, 2.25]
 
 
-@pytest.mark.parametrize(("rate", "expected"), [(2.0, [0.0, 0.25, 1.0, 1.125]), (0.5, [0, 1, 4, 4.5])])
+@pytest.mark.parametrize(
+    ("rate", "expected"), [(2.0, [0.0, 0.25, 1.0, 1.125]), (0.5, [0, 1, 4, 4.5])]
+)
 def test_rate_scales_the_schedule(
     make_session: MakeSession, opened: list, rate: float, expected: list[float]
 ) -> None:
-    h = Harness(open_all(opened, [make_session(STEADY, vehicle=None)], ["alpha"]), PlayOptions(rate=rate))
+    h = Harness(
+        open_all(opened, [make_session(STEADY, vehicle=None)], ["alpha"]), PlayOptions(rate=rate)
+    )
     h.player.run()
     assert h.times() == [pytest.approx(t) for t in expected]
 
 
 def test_fast_never_waits(make_session: MakeSession, opened: list) -> None:
-    h = Harness(open_all(opened, [make_session(STEADY, vehicle=None)], ["alpha"]), PlayOptions(rate=None))
+    h = Harness(
+        open_all(opened, [make_session(STEADY, vehicle=None)], ["alpha"]), PlayOptions(rate=None)
+    )
     summary = h.player.run()
     assert h.times() == [0.0] * 4
     assert h.clock.waits == []
@@ -124,7 +130,9 @@ def test_rate_change_reanchors_at_the_position(make_session: MakeSession, opened
 
 
 def test_rate_ladder_up_to_fast(make_session: MakeSession, opened: list) -> None:
-    h = Harness(open_all(opened, [make_session(STEADY, vehicle=None)], ["alpha"]), PlayOptions(rate=100.0))
+    h = Harness(
+        open_all(opened, [make_session(STEADY, vehicle=None)], ["alpha"]), PlayOptions(rate=100.0)
+    )
     h.at(0.001, SetRate(steps=1))  # past 100 is as fast as possible
     h.player.run()
     assert h.times() == [0.0, 0.001, 0.001, 0.001]
@@ -223,14 +231,18 @@ def test_seek_is_clamped_to_the_replay(make_session: MakeSession, opened: list) 
 
 
 def test_commands_after_the_end_fail(make_session: MakeSession, opened: list) -> None:
-    h = Harness(open_all(opened, [make_session(STEADY, vehicle=None)], ["alpha"]), PlayOptions(rate=None))
+    h = Harness(
+        open_all(opened, [make_session(STEADY, vehicle=None)], ["alpha"]), PlayOptions(rate=None)
+    )
     h.player.run()
     with pytest.raises(ReplayError, match="ended"):
         h.player.submit(Pause()).result()
 
 
 def test_loop_starts_again(make_session: MakeSession, opened: list) -> None:
-    h = Harness(open_all(opened, [make_session(STEADY, vehicle=None)], ["alpha"]), PlayOptions(loop=True))
+    h = Harness(
+        open_all(opened, [make_session(STEADY, vehicle=None)], ["alpha"]), PlayOptions(loop=True)
+    )
     h.at(4.4, Stop())
     summary = h.player.run()
     assert h.names() == ["A", "B", "C", "D", "A", "B", "C"]
@@ -307,10 +319,16 @@ MIXED = [
     ("spec", "expected"),
     [
         (FilterSpec(exclude_sources=("pHelmIvP",)), ["NAV_X", "VIEW", "NAV_Y"]),
-        (FilterSpec(exclude_sources=("pHelmIvP:HELM_VAR_INIT",)), ["NAV_X", "VIEW", "NAV_Y", "DESIRED_SPEED"]),
+        (
+            FilterSpec(exclude_sources=("pHelmIvP:HELM_VAR_INIT",)),
+            ["NAV_X", "VIEW", "NAV_Y", "DESIRED_SPEED"],
+        ),
         (FilterSpec(include_sources=("p*@shoreside",)), ["VIEW"]),
         (FilterSpec(include_sources=("pMarineViewer",)), ["VIEW"]),
-        (FilterSpec(include_sources=("pN?v", "pHelm*"), exclude_sources=("*:*",)), ["NAV_X", "NAV_Y", "DESIRED_SPEED"]),
+        (
+            FilterSpec(include_sources=("pN?v", "pHelm*"), exclude_sources=("*:*",)),
+            ["NAV_X", "NAV_Y", "DESIRED_SPEED"],
+        ),
         (FilterSpec(include_vars=("NAV_*",)), ["NAV_X", "NAV_Y"]),
         (FilterSpec(exclude_vars=("NAV_?", "VIEW")), ["DEPLOY", "DESIRED_SPEED"]),
     ],
@@ -380,7 +398,8 @@ def test_values_survive_exactly(make_session: MakeSession, opened: list) -> None
     got = [s.message.value for s in h.data()]
     # Doubles come back as pLogger wrote them (5 decimals); everything else byte for byte.
     assert got == [-0.0, 0.0, 123456789.12346, *values[3:]]
-    assert isinstance(got[0], float) and str(got[0]) == "-0.0"
+    assert isinstance(got[0], float)
+    assert str(got[0]) == "-0.0"
     assert isinstance(got[8], str)  # "0.5" unpadded was a string, and stays one
 
 

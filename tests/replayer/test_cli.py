@@ -1,0 +1,107 @@
+"""``fleetlog replay``'s arguments: one clear line for every bad input, before any Zenoh."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from helpers import run_cli
+from replay_support import Line, MakeSession
+from typer.testing import CliRunner
+
+from fleetlog.cli.app import app
+from fleetlog.cli.replay import parse_when
+from fleetlog.errors import FleetlogError, UsageError
+
+ISOLATED = ["--no-keys", "--wait", "0", "--no-multicast-scouting"]
+
+
+def invoke(*args: str) -> BaseException | None:
+    """Run the command in-process; return the FleetlogError it ended with (the CLI prints it)."""
+    from fleetlog.cli import commands  # noqa: F401  (registers the commands)
+
+    result = CliRunner().invoke(app, ["replay", *args, *ISOLATED])
+    return result.exception
+
+
+def test_missing_input_is_one_line(tmp_path: Path, cli_env: dict[str, str]) -> None:
+    result = run_cli("replay", str(tmp_path / "nope.alog"), *ISOLATED, env=cli_env)
+    assert result.returncode == 1
+    assert (
+        result.stderr.strip()
+        == f"fleetlog: error: {tmp_path / 'nope.alog'}: no such file or session directory"
+    )
+
+
+def test_corrupt_alog_names_the_file_and_line(
+    make_session: MakeSession, tmp_path: Path, cli_env: dict[str, str]
+) -> None:
+    session = make_session([Line(1.0, "A", "p", 1.0)])
+    alog = next(session.glob("*.alog"))
+    text = alog.read_text().splitlines(keepends=True)
+    # Lines that are neither entries nor comments, before the first entry (line 6).
+    alog.write_text("".join([*text[:5], "garbage here\n", "more\n", *text[5:]]))
+    result = run_cli("replay", str(session), "--fast", *ISOLATED, env=cli_env)
+    assert result.returncode == 1
+    lines = result.stderr.strip().splitlines()
+    assert lines[-1].startswith(f"fleetlog: error: {alog}:8: 2 line(s) before line 8")
+    bad = tmp_path / "bad.alog"
+    bad.write_text("not an alog\n")
+    result = run_cli("replay", str(bad), "--as", "x", *ISOLATED, env=cli_env)
+    assert result.returncode == 1
+    assert result.stderr.strip().startswith(f"fleetlog: error: {bad}:1: expected a banner line")
+
+
+def test_unknown_vehicle_asks_for_as(make_session: MakeSession) -> None:
+    session = make_session([Line(1.0, "A", "p", 1.0)], vehicle=None)
+    err = invoke(str(session))
+    assert isinstance(err, FleetlogError)
+    assert "cannot tell which vehicle" in str(err)
+    assert "--as V" in str(err)
+
+
+def test_remote_inputs_need_the_query_service(tmp_path: Path) -> None:
+    err = invoke("alpha:latest")
+    assert isinstance(err, FleetlogError)
+    assert (
+        str(err)
+        == "alpha:latest: remote inputs need the query service, which this fleetlog does not have"
+    )
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--rate", "500"], "rate 500 is outside 0.1 ... 100"),
+        (["--rate", "0.01"], "rate 0.01 is outside"),
+        (["--from", "soon"], "--from 'soon': give seconds"),
+        (["--from", "10", "--to", "5"], "--to 5 is before --from 10"),
+        (["--as", "a", "--as", "b", "--as", "c"], "--as was given 3 times for 1 inputs"),
+        (["--sort-window", "-1"], "sort window must be 0 or more"),
+        (["--root", "a/*"], "key root"),
+    ],
+)
+def test_bad_options(make_session: MakeSession, args: list[str], message: str) -> None:
+    err = invoke(str(make_session([Line(1.0, "A", "p", 1.0)])), *args)
+    assert isinstance(err, FleetlogError), err
+    assert message in str(err)
+
+
+@pytest.mark.parametrize(
+    ("text", "expected"),
+    [
+        ("12.5", (12.5, False)),
+        ("0", (0.0, False)),
+        ("1:02", (62.0, False)),
+        ("1:02:03.5", (3723.5, False)),
+        ("@1795345603.4", (1795345603.4, True)),
+    ],
+)
+def test_parse_when(text: str, expected: tuple[float, bool]) -> None:
+    assert parse_when(text, "--from") == expected
+
+
+@pytest.mark.parametrize("text", ["", "soon", "nan", "inf", "@", "1:xx"])
+def test_parse_when_refuses(text: str) -> None:
+    with pytest.raises(UsageError, match="--from"):
+        parse_when(text, "--from")
