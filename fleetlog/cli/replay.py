@@ -6,6 +6,7 @@ import re
 import signal
 import sys
 from contextlib import ExitStack
+from pathlib import Path
 from typing import Annotated
 
 import typer
@@ -204,6 +205,16 @@ def replay(
             rich_help_panel=_PANEL,
         ),
     ] = False,
+    cache_dir: Annotated[
+        Path | None,
+        typer.Option(
+            "--cache-dir",
+            metavar="DIR",
+            help="Where remote inputs (V:latest, V:SESSION) are fetched to"
+            " [default: ~/.cache/fleetlog/replay].",
+            rich_help_panel=_PANEL,
+        ),
+    ] = None,
     wait: Annotated[
         float,
         typer.Option(
@@ -222,10 +233,12 @@ def replay(
 ) -> None:
     """Replay alogs into Zenoh as though the original processes were running.
 
-    Each entry is published on <root>/V/var/VAR with its original source, type and exact
-    value, at its recorded time (scaled by --rate). Inputs from several vehicles play
-    together on one clock by absolute time, each under its own vehicle. In a terminal: space
-    pauses, arrows seek, +/- change the rate, n steps one entry, q quits. Remotely: query
+    An INPUT is an alog, a session directory, or a vehicle's session fetched through its
+    query service first: V:latest or V:SESSION. Each entry is published on
+    <root>/V/var/VAR with its original source, type and exact value, at its recorded time
+    (scaled by --rate). Inputs from several vehicles play together on one clock by absolute
+    time, each under its own vehicle. In a terminal: space pauses, arrows seek, +/- change
+    the rate, n steps one entry, q quits. Remotely: query
     <root>/V/@fleetlog/replay/control?cmd=pause|resume|seek;t=S|rate;x=R|step|stop, and
     follow <root>/V/@fleetlog/replay/status.
     """
@@ -242,6 +255,7 @@ def replay(
         tuple(var or ()),
         tuple(exclude_var or ()),
     )
+    console = Console(stderr=True, highlight=False, soft_wrap=True)
     service = ReplayService(
         ReplayConfig(
             inputs=inputs,
@@ -250,6 +264,8 @@ def replay(
             zenoh=zopts,
             wait=wait,
             errors="skip" if skip_bad_lines else "raise",
+            cache=cache_dir,
+            announce=lambda text: console.print(f"fleetlog: {text}", markup=False),
         )
     )
     service.open_inputs()
@@ -275,13 +291,19 @@ def replay(
             db_time=not no_db_time,
         )
     )
-    _run(service, player, key_root, keys=not no_keys and sys.stdin.isatty(), seek_step=seek_step)
+    keys = not no_keys and sys.stdin.isatty()
+    _run(service, player, console, key_root, keys=keys, seek_step=seek_step)
 
 
 def _run(
-    service: ReplayService, player: Player, root: str, *, keys: bool, seek_step: float
+    service: ReplayService,
+    player: Player,
+    console: Console,
+    root: str,
+    *,
+    keys: bool,
+    seek_step: float,
 ) -> None:
-    console = Console(stderr=True, highlight=False, soft_wrap=True)
     vehicles = ", ".join(dict.fromkeys(player.vehicles))
     control = service_key(root, player.vehicles[0], "replay", "control")
     console.print(

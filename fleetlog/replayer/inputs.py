@@ -21,7 +21,7 @@ import io
 import itertools
 import os
 import re
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import cast
@@ -198,14 +198,19 @@ def _alog_of(spec: str) -> Path:
     if path.is_file():
         return path
     if parse_remote(spec) is not None:
-        msg = f"{spec}: remote inputs need the query service, which this fleetlog does not have"
+        msg = f"{spec}: a remote input, but no way to fetch it was given (open_inputs(fetch=...))"
         raise ReplayError(msg)
     msg = f"{spec}: no such file or session directory"
     raise ReplayError(msg)
 
 
 def open_input(
-    spec: str | os.PathLike[str], vehicle: str | None = None, *, errors: Errors = "raise"
+    spec: str | os.PathLike[str],
+    vehicle: str | None = None,
+    *,
+    errors: Errors = "raise",
+    how: str = "--as",
+    name: str | None = None,
 ) -> ReplayInput:
     """Open one input: check its banner, find its vehicle and, if cheap, its end time.
 
@@ -213,29 +218,34 @@ def open_input(
         spec: an alog file or a session directory.
         vehicle: the vehicle to publish as (``--as``); found from the log when None.
         errors: the reader's error policy for bad lines (``"raise"`` or ``"skip"``).
+        how: how ``vehicle`` was chosen, for the summary.
+        name: the input as the user named it (the spec by default).
 
     Raises:
         ReplayError: the input does not exist, or its vehicle cannot be found.
         StorageError: the file cannot be read, or has no usable LOGSTART.
         FormatError: the banner is garbled (the message names the file and line).
     """
-    name = os.fspath(spec)
-    reader = AlogReader(_alog_of(name), errors=errors)
+    path = os.fspath(spec)
+    name = path if name is None else name
+    reader = AlogReader(_alog_of(path), errors=errors)
     try:
-        logstart, found = _identify(reader, name, vehicle)
+        logstart, found = _identify(reader, name, vehicle, how)
         return ReplayInput(name, reader, found[0], found[1], logstart, _tail_end(reader))
     except BaseException:
         reader.close()
         raise
 
 
-def _identify(reader: AlogReader, name: str, vehicle: str | None) -> tuple[float, tuple[str, str]]:
+def _identify(
+    reader: AlogReader, name: str, vehicle: str | None, how: str
+) -> tuple[float, tuple[str, str]]:
     """Return the input's LOGSTART and ``(vehicle, how it was found)``."""
     logstart = reader.logstart
     if logstart is None:
         msg = f"{reader.path}: no usable banner, so its entries have no absolute time"
         raise StorageError(msg)
-    found = (vehicle, "--as") if vehicle is not None else detect_vehicle(reader)
+    found = (vehicle, how) if vehicle is not None else detect_vehicle(reader)
     if found is None:
         msg = (
             f"{name}: cannot tell which vehicle this log is from (no DB_TIME from"
@@ -250,13 +260,22 @@ def open_inputs(
     vehicles: Sequence[str] = (),
     *,
     errors: Errors = "raise",
+    fetch: Callable[[RemoteSpec], Path] | None = None,
 ) -> list[ReplayInput]:
     """Open several inputs; ``vehicles`` is empty, one name for all, or one per input.
+
+    Args:
+        specs: alogs, session directories, and (with ``fetch``) remote sessions.
+        vehicles: ``--as``.
+        errors: the readers' error policy.
+        fetch: brings a remote session (``V:latest``, ``V:SESSION``) into a local directory;
+            without it a remote input is refused. Its vehicle is ``V`` unless ``--as``.
 
     Raises:
         ReplayError: no inputs, a wrong number of vehicle names, or as :func:`open_input`.
         StorageError: as :func:`open_input`.
         FormatError: as :func:`open_input`.
+        QueryError: a remote session could not be fetched.
     """
     if not specs:
         msg = "nothing to replay: give at least one alog or session directory"
@@ -277,7 +296,16 @@ def open_inputs(
     opened: list[ReplayInput] = []
     try:
         for spec, vehicle in zip(specs, names, strict=True):
-            opened.append(open_input(spec, vehicle, errors=errors))
+            remote = parse_remote(os.fspath(spec)) if fetch is not None else None
+            if fetch is not None and remote is not None:
+                local = fetch(remote)
+                how = "--as" if vehicle is not None else "remote"
+                chosen = remote.vehicle if vehicle is None else vehicle
+                opened.append(
+                    open_input(local, chosen, errors=errors, how=how, name=os.fspath(spec))
+                )
+            else:
+                opened.append(open_input(spec, vehicle, errors=errors))
     except BaseException:
         for item in opened:
             item.close()

@@ -13,13 +13,15 @@ import threading
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 from fleetlog.errors import ReplayError
 from fleetlog.replayer.clock import Clock, RealClock
 from fleetlog.replayer.control import parse_query
 from fleetlog.replayer.engine import Player, PlayOptions
-from fleetlog.replayer.inputs import ReplayInput, open_inputs
+from fleetlog.replayer.inputs import RemoteSpec, ReplayInput, open_inputs
+from fleetlog.replayer.remote import default_cache, fetch_remote
 from fleetlog.replayer.report import Summary
 from fleetlog.storage.readers import Errors
 from fleetlog.transport.replay import ReplayLink
@@ -49,6 +51,9 @@ class ReplayConfig:
         confirm: seconds to wait, at the end, for each recorder to confirm receipt.
         status_period: seconds between status publications.
         errors: the readers' policy for malformed lines (``"raise"`` or ``"skip"``).
+        cache: where remote inputs (``V:latest``, ``V:SESSION``) are fetched to; None for
+            ``~/.cache/fleetlog/replay``.
+        announce: told, in a sentence, what is being fetched.
     """
 
     inputs: Sequence[str]
@@ -60,6 +65,8 @@ class ReplayConfig:
     confirm: float = 5.0
     status_period: float = 0.25
     errors: Errors = "raise"
+    cache: Path | None = None
+    announce: Callable[[str], None] | None = None
 
 
 class ReplayService:
@@ -93,11 +100,20 @@ class ReplayService:
             ReplayError: no inputs, a missing input, an unknown vehicle.
             StorageError: an input cannot be read.
             FormatError: an input's banner is garbled (names the file and line).
+            QueryError: a remote input could not be fetched.
+            TransportError: (remote inputs) the Zenoh session cannot be opened.
         """
         if not self.inputs:
             config = self.config
-            self.inputs = open_inputs(config.inputs, config.vehicles, errors=config.errors)
+            self.inputs = open_inputs(
+                config.inputs, config.vehicles, errors=config.errors, fetch=self._fetch
+            )
         return self.inputs
+
+    def _fetch(self, spec: RemoteSpec) -> Path:
+        config = self.config
+        cache = config.cache if config.cache is not None else default_cache()
+        return fetch_remote(spec, config.zenoh, config.root, cache, config.announce)
 
     @property
     def origin(self) -> float:

@@ -60,13 +60,10 @@ def test_unknown_vehicle_asks_for_as(make_session: MakeSession) -> None:
     assert "--as V" in str(err)
 
 
-def test_remote_inputs_need_the_query_service(tmp_path: Path) -> None:
+def test_remote_input_of_a_vehicle_that_is_not_up() -> None:
     err = invoke("alpha:latest")
     assert isinstance(err, FleetlogError)
-    assert (
-        str(err)
-        == "alpha:latest: remote inputs need the query service, which this fleetlog does not have"
-    )
+    assert str(err).startswith("vehicle 'alpha' is not up")
 
 
 @pytest.mark.parametrize(

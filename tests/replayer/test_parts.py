@@ -212,6 +212,8 @@ def test_inputs_find_their_vehicle(make_session: MakeSession) -> None:
         item.close()
     with pytest.raises(ReplayError, match="nothing to replay"):
         open_inputs([])
+    with pytest.raises(ReplayError, match="a remote input, but no way to fetch it"):
+        open_inputs(["alpha:latest"])
 
 
 def test_alog_file_and_compressed_input(make_session: MakeSession) -> None:
