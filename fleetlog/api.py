@@ -21,10 +21,9 @@ import time
 from types import TracebackType
 from typing import Any
 
-import zenoh
-
 from fleetlog.errors import QueryError
 from fleetlog.transport.bus import MoosPublisher
+from fleetlog.transport.queries import ZenohSession
 from fleetlog.transport.services import get_replies, live_vehicles
 from fleetlog.transport.session import SessionOptions, open_session
 from fleetlog.wire.keys import DEFAULT_ROOT, check_root, service_key, var_key
@@ -32,7 +31,7 @@ from fleetlog.wire.keys import DEFAULT_ROOT, check_root, service_key, var_key
 __all__ = ["Vehicle", "find_recorder"]
 
 
-def find_recorder(session: zenoh.Session, root: str = DEFAULT_ROOT, timeout: float = 2.0) -> str:
+def find_recorder(session: ZenohSession, root: str = DEFAULT_ROOT, timeout: float = 2.0) -> str:
     """Return the vehicle of the one recorder this session can reach.
 
     Raises:
@@ -48,13 +47,12 @@ def find_recorder(session: zenoh.Session, root: str = DEFAULT_ROOT, timeout: flo
     return vehicles[0]
 
 
-def _matching(pub: zenoh.Publisher) -> bool:
-    """Whether a subscriber matches the publisher's key.
+def _matching(status: Any) -> bool:
+    """Whether a publisher's ``matching_status`` says a subscriber matches its key.
 
     zenoh's stub says ``matching_status`` is a bool, but at run time it is a MatchingStatus,
     which is always truthy: read its ``matching`` field.
     """
-    status: Any = pub.matching_status
     return bool(getattr(status, "matching", status))
 
 
@@ -78,7 +76,7 @@ class Vehicle:
         options: SessionOptions | None = None,
         root: str = DEFAULT_ROOT,
         drop: bool = False,
-        session: zenoh.Session | None = None,
+        session: ZenohSession | None = None,
     ) -> None:
         self.root = check_root(root)
         self._own = session is None
@@ -114,7 +112,7 @@ class Vehicle:
         pub = self.session.declare_publisher(key)
         try:
             deadline = time.monotonic() + timeout
-            while not _matching(pub):
+            while not _matching(pub.matching_status):
                 if time.monotonic() > deadline:
                     return False
                 time.sleep(0.005)

@@ -18,14 +18,20 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any, Protocol
 
-import zenoh
-
-from fleetlog.errors import FleetlogError
+from fleetlog.errors import FleetlogError, TransportError
 from fleetlog.moos.mission import LoggerConfig
 from fleetlog.moos.patterns import chunk_includes, name_to_chunk, reduce_chunks
 from fleetlog.recorder.engine import Recorder
 from fleetlog.transport.bus import MoosPublisher, SampleDecoder, declare_fifo_subscriber
+from fleetlog.transport.queries import (
+    IncomingQuery,
+    LivelinessToken,
+    ServiceQueryable,
+    ZenohSession,
+    declare_token,
+)
 from fleetlog.transport.session import SessionOptions, open_session, translate_zerror
 from fleetlog.wire.keys import service_key
 from fleetlog.wire.message import MoosMessage
@@ -36,6 +42,17 @@ __all__ = ["RecorderService", "ServiceOptions"]
 MAX_SUBSCRIBERS = 8
 _FLUSH_DELAY = 0.01
 _TICK = 0.02
+
+
+class _Fifo(Protocol):
+    """What the service uses of a FIFO subscriber (declared by the transport layer)."""
+
+    @property
+    def handler(self) -> Any: ...
+
+    def try_recv(self) -> Any: ...
+
+    def undeclare(self) -> None: ...
 
 
 @dataclass
@@ -87,9 +104,9 @@ class RecorderService:
         self._stop = threading.Event()
         self.ready = threading.Event()
         self.recorder: Recorder | None = None
-        self._subscribers: list[zenoh.Subscriber[zenoh.handlers.Handler[zenoh.Sample]]] = []
+        self._subscribers: list[_Fifo] = []
         self._chunks: set[str] = set()
-        self._session: zenoh.Session | None = None
+        self._session: ZenohSession | None = None
         self._var_prefix = f"{options.root}/{name_to_chunk(options.vehicle)}/var/"
 
     def stop(self) -> None:
@@ -132,8 +149,8 @@ class RecorderService:
         publisher = MoosPublisher(session, opts.root, opts.vehicle, self.config.app_name)
         errors: list[str] = []
         outbox = _Outbox(publisher, errors.append)
-        token = None
-        status_q = None
+        token: LivelinessToken | None = None
+        status_q: ServiceQueryable | None = None
         recorder: Recorder | None = None
         try:
             recorder = Recorder(
@@ -148,10 +165,7 @@ class RecorderService:
             self.recorder = recorder
             for chunk in self._initial_chunks(recorder):
                 self._subscribe_chunk(chunk)
-            with translate_zerror("liveliness token"):
-                token = session.liveliness().declare_token(
-                    service_key(opts.root, opts.vehicle, "recorder")
-                )
+            token = declare_token(session, service_key(opts.root, opts.vehicle, "recorder"))
             status_q = self._declare_status(session, recorder)
             recorder.start()
             self.ready.set()
@@ -160,59 +174,80 @@ class RecorderService:
             self._loop(recorder)
             self._drain(recorder, deadline=time.monotonic() + 2.0)
         finally:
+            # Stop reception first, then log what the closed channels still hold: a sample
+            # that reached the recorder is on disk (an undeclared subscriber's try_recv
+            # fails, its handler still yields what was queued).
+            handlers = [sub.handler for sub in self._subscribers]
             for sub in self._subscribers:
-                with contextlib.suppress(zenoh.ZError):
+                with contextlib.suppress(TransportError), translate_zerror("undeclare"):
                     sub.undeclare()
-            if recorder is not None:
-                self._drain(recorder, deadline=time.monotonic() + 0.5)
-                recorder.stop()
             self._subscribers.clear()
-            for entity in (status_q, token):
-                if entity is not None:
-                    with contextlib.suppress(zenoh.ZError):
-                        entity.undeclare()  # type: ignore[no-untyped-call]  # zenoh's stub
+            if recorder is not None:
+                self._drain_closed(recorder, handlers)
+                recorder.stop()
+            if status_q is not None:
+                status_q.undeclare()
+            if token is not None:
+                token.undeclare()
             outbox.close()
             publisher.close()
             session.close()
             self._session = None
         return RecorderStatsView(recorder.stats.as_dict() if recorder else {}, errors)
 
-    def _declare_status(self, session: zenoh.Session, recorder: Recorder) -> zenoh.Queryable[None]:
+    def _declare_status(self, session: ZenohSession, recorder: Recorder) -> ServiceQueryable:
+        # A queryable drained by a thread of its own, not a callback: a callback would run
+        # on Zenoh's network thread and wait for the GIL the busy engine holds, stalling the
+        # link that carries the samples.
         key = service_key(self.options.root, self.options.vehicle, "status")
 
-        def reply(query: zenoh.Query) -> None:
+        def answer(query: IncomingQuery) -> None:
             stats = recorder.stats.as_dict()
             session_dir = recorder.session.directory if recorder.session else None
             body = {"vehicle": self.options.vehicle, "directory": session_dir, **stats}
-            with contextlib.suppress(zenoh.ZError):
-                query.reply(key, json.dumps(body), encoding=zenoh.Encoding.APPLICATION_JSON)
+            try:
+                query.reply(key, json.dumps(body).encode(), encoding="application/json")
+            except TransportError:
+                pass  # the querier is gone
+            finally:
+                query.finish()
 
-        with translate_zerror("status queryable"):
-            return session.declare_queryable(key, reply)
+        return ServiceQueryable(session, key, answer)
+
+    @staticmethod
+    def _pump(recv: Callable[[], Any], recorder: Recorder, decoder: SampleDecoder) -> int:
+        """Log every sample ``recv`` yields until it yields None; return how many."""
+        count = 0
+        sample = recv()
+        while sample is not None:
+            incoming = decoder.decode(sample)
+            if incoming is not None:
+                recorder.handle(incoming.message, garbled=incoming.garbled)
+            else:
+                recorder.unreadable(str(sample.key_expr))
+            count += 1
+            sample = recv()
+        return count
 
     def _drain(self, recorder: Recorder, deadline: float) -> None:
-        """Log what is still queued (shutdown): until the FIFOs are empty or the deadline."""
+        """Log what is still queued (shutdown): until the FIFOs stay empty or the deadline."""
         decoder = SampleDecoder(self._var_prefix)
         while time.monotonic() < deadline:
             got = 0
-            for sub in list(self._subscribers):
-                try:
-                    sample = sub.try_recv()
-                except zenoh.ZError:
-                    continue
-                while sample is not None:
-                    incoming = decoder.decode(sample)
-                    if incoming is not None:
-                        recorder.handle(incoming.message, garbled=incoming.garbled)
-                    else:
-                        recorder.unreadable(str(sample.key_expr))
-                    got += 1
-                    try:
-                        sample = sub.try_recv()
-                    except zenoh.ZError:
-                        break
+            for sub in self._subscribers:
+                with translate_zerror("subscriber"):
+                    got += self._pump(sub.try_recv, recorder, decoder)
             if not got:
                 break
+        recorder.flush()
+
+    def _drain_closed(self, recorder: Recorder, handlers: list[Any]) -> None:
+        """Log what undeclared subscribers' channels still hold, until each is closed."""
+        decoder = SampleDecoder(self._var_prefix)
+        for handler in handlers:
+            # A closed, empty channel raises instead of returning None: that is its end.
+            with contextlib.suppress(TransportError), translate_zerror("subscriber"):
+                self._pump(handler.try_recv, recorder, decoder)
         recorder.flush()
 
     def _loop(self, recorder: Recorder) -> None:
