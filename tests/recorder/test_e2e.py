@@ -825,3 +825,21 @@ def test_sigint_under_load_logs_everything_received(
     got = [e.value for e in entries(directory / f"{directory.name}.alog") if e.key == "N"]
     assert got == [float(i) for i in range(count)]
     assert "lost 0 in 1 session(s)" in rec.stderr
+
+
+def test_no_session_directory_at_all_is_one_line_and_exit_1(
+    tmp_path: Path, endpoint: str, cli_env: dict[str, str]
+) -> None:
+    # neither Path nor the ./ fallback can be created (File names a missing subdirectory)
+    (tmp_path / "m.moos").write_text(
+        "ProcessConfig = pLogger\n{\n  Path = /nonexistent\n  File = no/such\n}\n"
+    )
+    done = run_cli(
+        "record", "m.moos", "-l", endpoint, "--no-multicast-scouting", cwd=tmp_path, env=cli_env
+    )
+    assert done.returncode == 1
+    assert re.fullmatch(
+        r"fleetlog: error: cannot create log directory /nonexistent/no/such_\S+ \(No such file "
+        r"or directory\) nor the fallback \./no/such_\S+ \(No such file or directory\)\n",
+        done.stderr,
+    )
