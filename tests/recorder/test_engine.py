@@ -1183,3 +1183,22 @@ def test_logger_restart_is_not_logged_without_a_log_entry_or_wildcard(
     assert rig.file(".alog") != old
     assert [e.key for e in rig.entries(path=old)] == ["A"]  # the restart itself: not logged
     assert rig.rec.stats.ignored == 1
+
+
+def test_async_log_false_keeps_only_the_banner(rigs: Callable[..., Rig]) -> None:
+    rig = rigs("AsyncLog = false\nSyncLog = true\nLog = A @ 0")
+    rig.send("A", 1.5, at=0.25)
+    rig.send("MOOS_DEBUG", "still in the ylog", at=0.25)
+    rig.clock.at(0.5)
+    rig.rec.tick()
+    assert rig.read(".alog") == rig.rec.session.banner(".alog", T0)  # type: ignore[union-attr]
+    assert [y.text for y in parse_ylog(rig.read(".ylog")).entries] == ["still in the ylog"]
+    assert parse_slog(rig.read(".slog")).rows[-1].values == (1.5,)
+
+
+def test_global_log_path_wins_over_path(rigs: Callable[..., Rig], tmp_path: Path) -> None:
+    (tmp_path / "global").mkdir()
+    rig = rigs("File = G\nPath = elsewhere\nLog = A @ 0", head="GlobalLogPath = global/")
+    assert rig.rec.session is not None
+    assert rig.rec.session.directory == f"global/{root_at('G')}"
+    assert rig.dir == tmp_path / "global" / root_at("G")
