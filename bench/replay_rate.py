@@ -171,7 +171,8 @@ def measure_timing(path: Path, n: int, clock: RealClock, display: bool) -> tuple
             player = Player([source], link.publish, clock, options, link.prepare)
             if display:
                 console = Console(file=io.StringIO(), force_terminal=True, width=120)
-                with ProgressLine(player.status, console, keys=True):
+                with ProgressLine(player.status, console, keys=True) as line:
+                    player.idle_hooks.append(line.refresh)
                     summary = player.run()
             else:
                 summary = player.run()

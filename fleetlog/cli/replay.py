@@ -327,7 +327,8 @@ def _run(
         if keys:
             terminal.enter_context(Keyboard(player.submit, seek_step))
         if live:
-            terminal.enter_context(ProgressLine(player.status, console, keys=keys))
+            progress = terminal.enter_context(ProgressLine(player.status, console, keys=keys))
+            player.idle_hooks.append(progress.refresh)
         summary = service.run(on_ready=ready)
     for line in summary.lines():
         console.print(f"fleetlog: {line}" if not line.startswith(" ") else line, markup=False)

@@ -2,8 +2,9 @@
 
 Both are used only when the terminal is there: keys when stdin is a TTY (and ``--no-keys``
 is not given), the live progress line when stderr is a TTY. The progress line is redrawn
-four times a second; drawing takes the GIL for a moment, which the 2 ms timing budget
-absorbs (measured by bench/replay_rate.py).
+by the player itself, from its idle time (:attr:`fleetlog.replayer.engine.Player.idle_hooks`),
+never by a thread of rich's own: a redraw holds the GIL for 0.3 ms, and up to 5 ms on a busy
+machine, which would make the entry due meanwhile late by as much.
 """
 
 from __future__ import annotations
@@ -93,7 +94,7 @@ class ProgressLine:
         self._live = Live(
             get_renderable=self._render,
             console=self.console,
-            refresh_per_second=4,
+            auto_refresh=False,
             transient=True,
             redirect_stdout=False,
             redirect_stderr=False,
@@ -110,6 +111,11 @@ class ProgressLine:
         if self._live is not None:
             self._live.stop()
             self._live = None
+
+    def refresh(self) -> None:
+        """Redraw the line (call it from the player's idle hooks)."""
+        if self._live is not None:
+            self._live.refresh()
 
 
 class Keyboard:

@@ -25,7 +25,9 @@ and keeps pLogger's terminator space); duplicates are dropped (see
 :mod:`fleetlog.replayer.schedule`).
 
 Threads: :meth:`Player.run` runs in one thread; :meth:`Player.submit`,
-:meth:`Player.heartbeat` and :meth:`Player.status` may be called from any other.
+:meth:`Player.heartbeat` and :meth:`Player.status` may be called from any other. Periodic
+work such as a progress display runs in the player's thread through
+:attr:`Player.idle_hooks`, when the next entry leaves time for it.
 """
 
 from __future__ import annotations
@@ -74,6 +76,12 @@ Publish = Callable[[str, MoosMessage], None]
 Prepare = Callable[[str, str, Kind], None]
 #: Slack kept before a due entry when preparing the ones after it, seconds.
 _PREPARE_SLACK = 0.002
+#: The idle hooks (progress display, status publication) run this often, seconds...
+IDLE_PERIOD = 0.25
+#: ...when the next entry is at least this far off...
+IDLE_SLACK = 0.005
+#: ...or, if entries never leave that much room, after this long anyway.
+IDLE_FORCE = 1.0
 
 
 @dataclass(frozen=True)
@@ -155,6 +163,11 @@ class Player:
         self._publish = publish
         self._prepare = prepare
         self._prepared: set[tuple[str, str, Kind]] = set()
+        #: Work for the player's own thread when it has time to spare (redraw a progress
+        #: line, publish the status): done here, not in another thread, because another
+        #: thread holding the GIL for a millisecond delays the next entry by as much.
+        self.idle_hooks: list[Callable[[], None]] = []
+        self._last_idle = -float("inf")
         self._clock = clock
         self._filter = EntryFilter(self.options.filters)
         self.vehicles = [self.options.prefix + item.vehicle for item in inputs]
@@ -327,7 +340,8 @@ class Player:
             if state is State.STOPPED:
                 return
             if state is State.PAUSED:
-                clock.wait(None)
+                clock.wait(self._idle_deadline())
+                self._idle(clock.now(), None)
                 continue
             item = self._next
             if item is None or item.time > self._stop_time:
@@ -344,21 +358,31 @@ class Player:
                 self._advance()
                 continue
             if self._choked():
-                clock.wait(None)  # only a fresh heartbeat, a seek or a command ends it
+                # Only a fresh heartbeat, a seek or a command ends it.
+                clock.wait(self._idle_deadline())
+                self._idle(clock.now(), None)
                 continue
             due = None
             if self._rate is not None and not item.late:
                 due = self._due(item.time)
                 now = clock.now()
-                if now < due and self._prepare is not None:
-                    self._prepare_ahead(due)
+                if now < due:
+                    if self._prepare is not None:
+                        self._prepare_ahead(due)
+                    self._idle(clock.now(), due)
                     now = clock.now()
                 if now < due:
                     # Wake when the heartbeat turns stale too, so a choke stops the
-                    # position where uPlayBack's tick would have, not at the next entry.
+                    # position where uPlayBack's tick would have, not at the next entry;
+                    # and for the idle work, when the entry is far off.
                     deadline = min(due, self._choke_deadline(now))
+                    idle_at = self._idle_deadline()
+                    if idle_at is not None and idle_at < due - IDLE_SLACK:
+                        deadline = min(deadline, max(idle_at, now))
                     if clock.wait(deadline) or deadline < due:
                         continue  # apply the commands (or the choke), then look again
+            elif self.idle_hooks:
+                self._idle(clock.now(), None)
             self._emit(item, due)
 
     def _wrap(self) -> bool:
@@ -371,6 +395,23 @@ class Player:
             self._set_anchor(self._begin)
         self._slot = -1
         return True
+
+    def _idle_deadline(self) -> float | None:
+        return self._last_idle + IDLE_PERIOD if self.idle_hooks else None
+
+    def _idle(self, now: float, due: float | None) -> None:
+        """Run the idle hooks if their period is up and the next entry leaves time for them.
+
+        With entries closer than :data:`IDLE_SLACK` for a whole :data:`IDLE_FORCE`, they run
+        anyway: one late entry a second rather than a frozen display.
+        """
+        if not self.idle_hooks or now - self._last_idle < IDLE_PERIOD:
+            return
+        if due is not None and due - now < IDLE_SLACK and now - self._last_idle < IDLE_FORCE:
+            return
+        self._last_idle = now
+        for hook in self.idle_hooks:
+            hook()
 
     def _prepare_once(self, vehicle: str, name: str, kind: Kind) -> None:
         if self._prepare is None:

@@ -1,15 +1,14 @@
 """A replay process: inputs opened, a Zenoh session, the player, its control and its status.
 
 The player runs in the calling thread. Zenoh's callback threads deliver PLAYBACK_CHOKE
-heartbeats and control queries to it; a small thread publishes the status a few times a
-second. At the end, the service makes sure the recorders got everything before the session
-closes (a short-lived publisher loses its tail otherwise).
+heartbeats and control queries to it; the status is published four times a second from the
+player's idle time. At the end, the service makes sure the recorders got everything before
+the session closes (a short-lived publisher loses its tail otherwise).
 """
 
 from __future__ import annotations
 
 import sys
-import threading
 from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass, field
@@ -49,7 +48,6 @@ class ReplayConfig:
         wait: seconds to wait for every vehicle's variables to have a subscriber before
             playing (a put before that goes nowhere).
         confirm: seconds to wait, at the end, for each recorder to confirm receipt.
-        status_period: seconds between status publications.
         errors: the readers' policy for malformed lines (``"raise"`` or ``"skip"``).
         cache: where remote inputs (``V:latest``, ``V:SESSION``) are fetched to; None for
             ``~/.cache/fleetlog/replay``.
@@ -63,7 +61,6 @@ class ReplayConfig:
     zenoh: SessionOptions = field(default_factory=SessionOptions)
     wait: float = 1.0
     confirm: float = 5.0
-    status_period: float = 0.25
     errors: Errors = "raise"
     cache: Path | None = None
     announce: Callable[[str], None] | None = None
@@ -91,7 +88,6 @@ class ReplayService:
         self.missing: list[str] = []
         self.unconfirmed: list[str] = []
         self._link: ReplayLink | None = None
-        self._done = threading.Event()
 
     def open_inputs(self) -> list[ReplayInput]:
         """Open the inputs (before any network I/O), once.
@@ -187,11 +183,7 @@ class ReplayService:
         link.on_choke(player.heartbeat)
         link.serve(self._control, lambda: player.status().to_dict())
         self.missing = link.wait_for_subscribers(self.config.wait)
-        publisher = threading.Thread(
-            target=self._publish_status, args=(player, link), name="fleetlog-replay-status"
-        )
-        publisher.daemon = True
-        publisher.start()
+        player.idle_hooks.append(lambda: link.publish_status(player.status().to_dict()))
         # The player spins before each entry, holding the GIL; a short switch interval lets
         # the callback and status threads in within a millisecond instead of five.
         interval = sys.getswitchinterval()
@@ -203,8 +195,6 @@ class ReplayService:
             summary = player.run()
         finally:
             sys.setswitchinterval(interval)
-            self._done.set()
-            publisher.join()
         link.publish_status(player.status().to_dict())
         self.unconfirmed = link.confirm_delivery(self.config.confirm)
         return summary
@@ -223,7 +213,3 @@ class ReplayService:
         if self._link is not None:
             self._link.publish_status(doc)  # a UI following the status sees the change now
         return doc
-
-    def _publish_status(self, player: Player, link: ReplayLink) -> None:
-        while not self._done.wait(self.config.status_period):
-            link.publish_status(player.status().to_dict())

@@ -531,3 +531,22 @@ def test_status_reports_progress(make_session: MakeSession, opened: list) -> Non
     assert status.fraction == pytest.approx(0.5)
     assert status.to_dict()["rate"] == 1.0
     assert h.player.status().state is State.FINISHED
+
+
+def test_idle_hooks_run_in_the_gaps_and_while_paused(
+    make_session: MakeSession, opened: list
+) -> None:
+    h = Harness(open_all(opened, [make_session(STEADY, vehicle=None)], ["alpha"]))
+    calls: list[float] = []
+    h.player.idle_hooks.append(lambda: calls.append(round(h.clock.now(), 6)))
+    h.player.run()
+    # Every 0.25 s while waiting, never in the way of an entry: the schedule is unchanged.
+    assert calls == [0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5, 1.75, 2.0]
+    assert h.times() == [0.0, 0.5, 2.0, 2.25]
+    paused = Harness(open_all(opened, [make_session(STEADY, vehicle=None)], ["alpha"]))
+    calls.clear()
+    paused.player.idle_hooks.append(lambda: calls.append(round(paused.clock.now(), 6)))
+    paused.at(0.6, Pause())
+    paused.at(1.4, Resume())
+    paused.player.run()
+    assert [t for t in calls if 0.6 < t < 1.4] == [0.75, 1.0, 1.25]
