@@ -3,8 +3,9 @@
 :func:`fetch_session` downloads every file of a session into ``<out>/<session>/`` (the layout
 pLogger writes), each through a :class:`~fleetlog.storage.download.PartFile`:
 
-* ranges of 1 MiB with a few in flight (measured here: one range at a time halves the rate,
-  four reach it), appended in order so the ``.part`` length is always what arrived;
+* ranges of 1 MiB, 8 in flight (measured here on a loaded 2-core machine: 4 in flight gave
+  about 240 MB/s, 8 about 400 MB/s, 16 no more), appended in order so the ``.part`` length
+  is always what arrived;
 * a resumed or followed file is checked first: the range that continues it starts 4 KiB
   early, and those bytes must equal the end of the ``.part`` (a vehicle that rewrote the file,
   as pLogger does with ``FileTimeStamp = false``, is caught and the file fetched again);
@@ -35,7 +36,7 @@ from fleetlog.wire.query import DEFAULT_RANGE, FileInfo, FileMeta, check_compone
 
 __all__ = ["FetchOutcome", "FileOutcome", "Progress", "fetch_session"]
 
-WINDOW = 4
+WINDOW = 8
 OVERLAP = 4096
 POLL = 1.0
 RETRY_FOR = 30.0
