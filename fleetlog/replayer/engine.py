@@ -652,7 +652,13 @@ class Player:
             self._timing,
             list(self._errors),
             [
-                (item.name, self.vehicles[i], item.vehicle_from, item.reader.truncated)
+                (
+                    item.name,
+                    item.vehicle,
+                    self.vehicles[i],
+                    item.vehicle_from,
+                    item.reader.truncated,
+                )
                 for i, item in enumerate(self.inputs)
             ],
         )

@@ -148,7 +148,8 @@ class Summary:
         elapsed: wall seconds the replay ran.
         timing: how late paced entries were published.
         errors: the first few messages about unplayable entries.
-        inputs: per input, ``(name, vehicle, how the vehicle was found, truncated)``.
+        inputs: per input, ``(name, vehicle, published as, how the vehicle was found,
+            truncated)``.
     """
 
     state: State
@@ -160,7 +161,7 @@ class Summary:
     elapsed: float = 0.0
     timing: Lateness = field(default_factory=Lateness)
     errors: list[str] = field(default_factory=list)
-    inputs: list[tuple[str, str, str, bool]] = field(default_factory=list)
+    inputs: list[tuple[str, str, str, str, bool]] = field(default_factory=list)
 
     @property
     def published(self) -> int:
@@ -198,8 +199,9 @@ class Summary:
                 f"  timing: {self.timing.count} paced entries published p50 {p50 * 1e3:.3f} ms,"
                 f" p99 {p99 * 1e3:.3f} ms, max {self.timing.max * 1e3:.3f} ms after their time"
             )
-        for name, vehicle, how, truncated in self.inputs:
+        for name, vehicle, published_as, how, truncated in self.inputs:
+            alias = f", published as {published_as}" if published_as != vehicle else ""
             cut = " (its tail was cut; the entries before the cut were played)" if truncated else ""
-            out.append(f"  input {name}: vehicle {vehicle} (from {how}){cut}")
+            out.append(f"  input {name}: vehicle {vehicle} (from {how}){alias}{cut}")
         out.extend(f"  warning: {err}" for err in self.errors)
         return out

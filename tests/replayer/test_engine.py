@@ -515,7 +515,10 @@ def test_vehicles_merge_on_one_clock(make_session: MakeSession, opened: list) ->
     originals = [s.message.original_time for s in data]
     assert originals == sorted(originals)  # type: ignore[type-var]
     assert set(summary.vehicles) == {"sim_alpha", "sim_bravo"}
-    assert summary.inputs[1][2] == "._moos"
+    assert summary.inputs[1][1:4] == ("bravo", "sim_bravo", "._moos")
+    assert "  input " + str(bravo) + ": vehicle bravo (from ._moos), published as sim_bravo" in (
+        summary.lines()
+    )
 
 
 def test_status_reports_progress(make_session: MakeSession, opened: list) -> None:
