@@ -18,7 +18,9 @@ time.
 * Details read from the alog (LOGSTART, duration, vehicle, variables count) are cached by the
   alog's size and modification time, so listing again costs a ``stat`` per file.
 
-Every path is confined to the log root (:mod:`fleetlog.storage.confined`).
+Every path is confined to the log root (:mod:`fleetlog.storage.confined`). Files of a fetch
+in progress (``*.part``, ``*.part.json``) are not listed: a shore directory that is served in
+turn never offers half a file.
 """
 
 from __future__ import annotations
@@ -44,6 +46,8 @@ ALOG_SUFFIXES = (".alog", ".alog.zst", ".alog.gz")
 #: a session none of whose files changed for this long is complete (without a recorder)
 QUIET_SECONDS = 5.0
 _HINT_MAX = 4096
+#: a fetch in progress (fleetlog.storage.download): never listed, never served as a log
+_DOWNLOAD_SUFFIXES = (".part", ".part.json", ".part.json.tmp")
 _COMMUNITY_LINE = re.compile(r"^[ \t]*community[ \t]*=(.*)$", re.IGNORECASE | re.MULTILINE)
 _MOOS_HEAD = 64 << 10
 
@@ -128,6 +132,8 @@ class LogCatalog:
                 check_component(entry.name, "file")
             except FormatError:
                 continue
+            if entry.name.endswith(_DOWNLOAD_SUFFIXES):
+                continue
             if entry.is_symlink() and not self.root.contains(entry.path):
                 continue  # a symlink leaving the root is never listed (nor served)
             try:
@@ -166,7 +172,10 @@ class LogCatalog:
     def _order(name: str, entry: os.DirEntry[str] | None = None) -> float:
         parsed = parse_session_root(name)
         if parsed is not None:
-            return parsed[1].timestamp()
+            try:
+                return parsed[1].timestamp()
+            except (OverflowError, OSError, ValueError):
+                pass  # a year the platform's mktime cannot take: order by mtime
         try:
             return entry.stat().st_mtime if entry is not None else 0.0
         except OSError:

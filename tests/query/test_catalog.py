@@ -129,6 +129,8 @@ def test_symlinks_that_leave_the_root_are_refused(tmp_path: Path) -> None:
     (root / "E").symlink_to(outside)
     (session / "up").symlink_to(root)
     os.mkfifo(session / "pipe")
+    (session / "S.alog.part").write_text("half a download")
+    (session / "S.alog.part.json").write_text("{}")
     catalog = LogCatalog(root, vehicle="v")
     assert catalog.session_names() == ["S"]  # E leads outside
     names = {f.name for f in catalog.session("S", brief=True).files}
