@@ -30,8 +30,6 @@ import tempfile
 import time
 from pathlib import Path
 
-from benchlib import free_port, loadavg, spread
-
 from fleetlog.moos.alog import LineFormatter, format_banner
 from fleetlog.query.client import FleetClient
 from fleetlog.query.fetch import fetch_session
@@ -53,6 +51,23 @@ with conn:
             while block := file.read(1 << 20):
                 conn.sendall(block)
 """
+
+
+def free_port() -> int:
+    """Return a TCP port that is free on loopback right now."""
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def loadavg() -> str:
+    """Return the 1-minute load average (other engineers share the machine)."""
+    return f"{os.getloadavg()[0]:.2f}"
+
+
+def spread(values: list[float]) -> str:
+    """Return ``median [min–max]`` of figures."""
+    return f"{statistics.median(values):,.0f} [{min(values):,.0f}–{max(values):,.0f}]"
 
 
 def make_session(root: Path, megabytes: int) -> Path:
