@@ -26,7 +26,6 @@ from __future__ import annotations
 import argparse
 import io
 import random
-import statistics
 import tempfile
 import time
 from pathlib import Path
@@ -195,48 +194,59 @@ def main() -> None:
     parser.add_argument("-n", type=int, default=200_000, help="entries for the throughput runs")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--timing-seconds", type=float, default=3.0)
+    parser.add_argument("--only", choices=("throughput", "timing"), help="run one part only")
     args = parser.parse_args()
     with tempfile.TemporaryDirectory() as tmp:
-        big = Path(tmp) / "big.alog"
-        write_alog(big, [1.0 + i * 0.001 for i in range(args.n)])
-        rates: dict[str, list[float]] = {k: [] for k in ("parse", "schedule", "bare", "replay")}
-        for _ in range(args.rounds):
-            rates["parse"].append(measure_parse(big))
-            rates["schedule"].append(measure_schedule(big))
-            rates["bare"].append(measure_bare(big, args.n))
-            rates["replay"].append(measure_replay(big, args.n))
-        print(f"replay throughput, {args.n:,} entries, {args.rounds} rounds (load {loadavg()})")
-        labels = {
-            "parse": "(a) parse only (AlogReader)",
-            "schedule": "(b) schedule (parse+sort+dedupe)",
-            "bare": "(c) bare MoosPublisher put loop",
-            "replay": "(d) replay --fast (parse+publish)",
-        }
-        for key, label in labels.items():
-            print(f"  {label:36s} {spread(rates[key])} entries/s")
-        for other in ("parse", "bare"):
-            ratios = [r / o for r, o in zip(rates["replay"], rates[other], strict=True)]
-            print(f"  ratio replay / {other:5s}              {spread(ratios, '{:.2f}')}")
+        if args.only != "timing":
+            throughput(Path(tmp), args.n, args.rounds)
+        if args.only != "throughput":
+            timing(Path(tmp), args.timing_seconds)
 
-        timed = Path(tmp) / "timed.alog"
-        offsets = timing_offsets(args.timing_seconds)
-        write_alog(timed, offsets)
-        seconds = args.timing_seconds
-        print(f"1x timing, {len(offsets):,} entries over {seconds:g} s (ms late, p50/p99/max)")
-        variants = [
-            ("sleep only (baseline)", RealClock(spin_margin=0.0), False),
-            ("sleep + 1 ms spin", RealClock(), False),
-            ("sleep + spin, progress line on", RealClock(), True),
-        ]
-        results = {}
-        for label, clock, display in variants:
-            p50, p99, worst = measure_timing(timed, len(offsets), clock, display)
-            results[label] = p99
-            print(f"  {label:32s} p50 {p50:.3f}  p99 {p99:.3f}  max {worst:.3f}")
-        base = results["sleep only (baseline)"]
-        spin = results["sleep + 1 ms spin"]
-        print(f"  p99 ratio spin / sleep-only       {spin / base:.2f}  (target: p99 < 2 ms)")
-        print(f"  median throughput replay {statistics.median(rates['replay']):,.0f} entries/s")
+
+def throughput(tmp: Path, n: int, rounds: int) -> None:
+    big = tmp / "big.alog"
+    write_alog(big, [1.0 + i * 0.001 for i in range(n)])
+    rates: dict[str, list[float]] = {k: [] for k in ("parse", "schedule", "bare", "replay")}
+    for _ in range(rounds):
+        rates["parse"].append(measure_parse(big))
+        rates["schedule"].append(measure_schedule(big))
+        rates["bare"].append(measure_bare(big, n))
+        rates["replay"].append(measure_replay(big, n))
+    print(f"replay throughput, {n:,} entries, {rounds} rounds (load {loadavg()})")
+    labels = {
+        "parse": "(a) parse only (AlogReader)",
+        "schedule": "(b) schedule (parse+sort+dedupe)",
+        "bare": "(c) bare MoosPublisher put loop",
+        "replay": "(d) replay --fast (parse+publish)",
+    }
+    for key, label in labels.items():
+        print(f"  {label:36s} {spread(rates[key])} entries/s")
+    for other in ("parse", "bare"):
+        ratios = [r / o for r, o in zip(rates["replay"], rates[other], strict=True)]
+        print(f"  ratio replay / {other:5s}              {spread(ratios, '{:.2f}')}")
+
+
+def timing(tmp: Path, seconds: float) -> None:
+    timed = tmp / "timed.alog"
+    offsets = timing_offsets(seconds)
+    write_alog(timed, offsets)
+    print(
+        f"1x timing, {len(offsets):,} entries over {seconds:g} s, ms after due (p50/p99/max)"
+        f" (load {loadavg()})"
+    )
+    variants = [
+        ("sleep only (baseline)", RealClock(spin_margin=0.0), False),
+        ("sleep + 1 ms spin", RealClock(), False),
+        ("sleep + spin, progress line on", RealClock(), True),
+    ]
+    results = {}
+    for label, clock, display in variants:
+        p50, p99, worst = measure_timing(timed, len(offsets), clock, display)
+        results[label] = p99
+        print(f"  {label:32s} p50 {p50:.3f}  p99 {p99:.3f}  max {worst:.3f}")
+    base = results["sleep only (baseline)"]
+    spin = results["sleep + 1 ms spin"]
+    print(f"  p99 ratio spin / sleep-only       {spin / base:.2f}  (target: p99 < 2 ms)")
 
 
 if __name__ == "__main__":
