@@ -375,9 +375,10 @@ class Recorder:
         stats.received += 1
         stats.garbled += 1
         stats.lost += 1
-        if key not in self._unreadable:
-            if len(self._unreadable) < 1024:
-                self._unreadable.add(key)
+        # Reported once per key; past 1024 keys only counted, so a flood of distinct bad
+        # keys cannot turn into a flood of MOOS_DEBUG posts.
+        if key not in self._unreadable and len(self._unreadable) < 1024:
+            self._unreadable.add(key)
             self.debug(f"sample on {key} names no MOOS variable: not logged")
 
     def _line(self, session: SessionWriter, offset: float, name: str, msg: MoosMessage) -> str:

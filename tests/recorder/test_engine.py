@@ -1145,6 +1145,10 @@ def test_unreadable_keys_and_failed_subscriptions_are_reported(rigs: Callable[..
     stats = rig.rec.stats
     assert (stats.received, stats.garbled, stats.lost) == (2, 2, 2)
     assert rig.debugs() == ["sample on fleet/alpha/var/BAD%ZZ names no MOOS variable: not logged"]
+    for i in range(2000):
+        rig.rec.unreadable(f"fleet/alpha/var/BAD%ZZ{i}")
+    assert len(rig.debugs()) == 1023  # reported once per key, at most 1024 keys
+    assert stats.lost == 2002
     rig.cmd("LOG_REQUEST = B @ 0", at=1.0)  # accepted, but the subscription failed
     assert rig.debugs() == ["could not subscribe to B: Zenoh subscription to 'B' failed: closed"]
 
