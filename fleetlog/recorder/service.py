@@ -182,17 +182,22 @@ class RecorderService:
                 with contextlib.suppress(TransportError), translate_zerror("undeclare"):
                     sub.undeclare()
             self._subscribers.clear()
-            if recorder is not None:
-                self._drain_closed(recorder, handlers)
-                recorder.stop()
-            if status_q is not None:
-                status_q.undeclare()
-            if token is not None:
-                token.undeclare()
-            outbox.close()
-            publisher.close()
-            session.close()
-            self._session = None
+            try:
+                if recorder is not None:
+                    try:
+                        self._drain_closed(recorder, handlers)
+                    finally:
+                        recorder.stop()
+            finally:
+                # Whatever failed above, Zenoh is closed: a live session hangs the exit.
+                if status_q is not None:
+                    status_q.undeclare()
+                if token is not None:
+                    token.undeclare()
+                outbox.close()
+                publisher.close()
+                session.close()
+                self._session = None
         return RecorderStatsView(recorder.stats.as_dict() if recorder else {}, errors)
 
     def _declare_status(self, session: ZenohSession, recorder: Recorder) -> ServiceQueryable:
