@@ -1,0 +1,178 @@
+"""Publish → flushed-line latency of ``fleetlog record``, against a bare subscriber's latency.
+
+A publisher process (fleetlog's ``MoosPublisher``, BLOCK) puts doubles at a steady rate; each
+sample's attachment carries its publish time (``MoosPublisher`` stamps ``time.time()`` just
+before the put). Two consumers, in the same run:
+
+(a) bare: a zenoh-python FIFO subscriber; latency = receive time − publish time;
+(b) recorder: ``fleetlog record --vehicle bench`` (no mission) as a subprocess, while this
+    process tails its alog: it polls the file every ``--poll`` seconds, reads only what the
+    OS has, and notes when each complete line first appears; latency = that moment −
+    (LOGSTART + the line's time column, which is the publish time to 10 µs).
+
+So (b) is what a reader (or a ``kill -9``) sees: transport + queueing + the recorder's
+work + its flush policy + the poll interval. The issue requires ≤ 20 ms for plain logs.
+Percentiles are over every sample of a run; figures are the median [min–max] over rounds.
+
+    python bench/recorder_latency.py                       # 1,000/s and 10,000/s, 5 s each
+    python bench/recorder_latency.py --rates 1000,10000,40000 --seconds 3 --rounds 5
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from benchlib import (
+    END,
+    Helper,
+    RecorderProcess,
+    Tail,
+    free_port,
+    key_names,
+    loadavg,
+    percentile,
+    spread,
+    summary_counts,
+)
+
+BOUND = 0.020
+
+
+def figures(latencies: list[float]) -> dict[str, float]:
+    """p50/p99/max in ms, and the share above the 20 ms bound."""
+    lat = sorted(latencies)
+    over = sum(1 for x in lat if x > BOUND)
+    return {
+        "n": len(lat),
+        "p50": percentile(lat, 0.50) * 1e3,
+        "p99": percentile(lat, 0.99) * 1e3,
+        "max": lat[-1] * 1e3 if lat else float("nan"),
+        "over": over / len(lat) if lat else float("nan"),
+    }
+
+
+def publisher(port: int, n: int, keys: int, rate: float) -> Helper:
+    args = ["--connect", f"tcp/127.0.0.1:{port}", "-n", str(n), "--keys", str(keys)]
+    return Helper("publisher", [*args, "--rate", str(rate)])
+
+
+def run_bare(rate: float, n: int, keys: int) -> dict[str, float]:
+    port = free_port()
+    stamps = Helper("stamps", ["--listen", f"tcp/127.0.0.1:{port}", "-n", str(n + 1)])
+    stamps.read()
+    pub = publisher(port, n, keys, rate)
+    try:
+        pub.read()
+        pub.send("go")
+        pub.read()
+        got = stamps.read(timeout=n / rate + 60)
+    finally:
+        pub.finish()
+        stamps.finish()
+    return figures(got["latencies"])
+
+
+def run_recorder(rate: float, n: int, keys: int, workdir: Path, poll: float) -> dict[str, float]:
+    port = free_port()
+    rec = RecorderProcess(workdir, port)
+    names = {name.encode() for name in key_names(keys)}
+    marker = END.encode()
+    latencies: list[float] = []
+    logstart = None
+    pub: Helper | None = None
+    try:
+        tail = Tail(rec.alog)
+        pub = publisher(port, n, keys, rate)
+        pub.read()
+        pub.send("go")
+        clock = time.time
+        deadline = time.monotonic() + n / rate + 60
+        done = False
+        while not done and time.monotonic() < deadline:
+            lines = tail.read_lines()
+            seen = clock()
+            for line in lines:
+                if line.startswith(b"%% LOGSTART"):
+                    logstart = float(line.split()[2])
+                    continue
+                fields = line.split(None, 2)
+                if len(fields) < 2:
+                    continue
+                if fields[1] in names and logstart is not None:
+                    latencies.append(seen - (logstart + float(fields[0])))
+                elif fields[1] == marker:
+                    done = True
+            time.sleep(poll)
+        tail.close()
+        pub.read()
+    finally:
+        if pub is not None:
+            pub.finish()
+        summary = rec.stop()
+    result = figures(latencies)
+    stats = summary_counts(summary)
+    result["lost"] = float(stats.get("lost", -1))
+    result["skewed"] = float(stats.get("skewed", -1))
+    result["missing"] = float(n - len(latencies))
+    return result
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--rates", default="1000,10000", help="samples/s, comma separated")
+    parser.add_argument("--seconds", type=float, default=5.0, help="publishing time per run")
+    parser.add_argument("--keys", type=int, default=4)
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--poll", type=float, default=0.0005, help="alog poll interval (s)")
+    args = parser.parse_args()
+    rates = [float(r) for r in args.rates.split(",")]
+    print(
+        f"rates {', '.join(f'{r:,.0f}/s' for r in rates)}, {args.seconds:g} s each, "
+        f"{args.rounds} round(s), alog polled every {args.poll * 1e3:g} ms, load {loadavg()}"
+    )
+    results: dict[tuple[float, str], list[dict[str, float]]] = {}
+    ok = True
+    with tempfile.TemporaryDirectory(prefix="fleetlog-lat-") as tmp:
+        for r in range(args.rounds):
+            for rate in rates:
+                n = int(rate * args.seconds)
+                bare = run_bare(rate, n, args.keys)
+                rundir = Path(tmp) / f"r{r}-{int(rate)}"
+                rundir.mkdir()
+                rec = run_recorder(rate, n, args.keys, rundir, args.poll)
+                results.setdefault((rate, "bare"), []).append(bare)
+                results.setdefault((rate, "rec"), []).append(rec)
+                if rec["missing"] or rec["lost"] or rec["max"] > BOUND * 1e3:
+                    ok = False
+                print(
+                    f"  round {r + 1} {rate:>8,.0f}/s: bare p50 {bare['p50']:.3f} "
+                    f"p99 {bare['p99']:.3f} max {bare['max']:.2f} ms | recorder p50 "
+                    f"{rec['p50']:.3f} p99 {rec['p99']:.3f} max {rec['max']:.2f} ms, "
+                    f"{rec['over']:.2%} > 20 ms, missing {rec['missing']:.0f}, "
+                    f"lost {rec['lost']:.0f} (load {loadavg()})",
+                    flush=True,
+                )
+    print()
+    print("latency in ms, median [min–max] over rounds:")
+    print(f"  {'rate':>8}  {'':9} {'p50':<22} {'p99':<22} {'max':<22}")
+    for rate in rates:
+        for who, label in (("bare", "bare sub"), ("rec", "recorder")):
+            rows = results[(rate, who)]
+            cells = [spread([x[q] for x in rows], "{:.2f}") for q in ("p50", "p99", "max")]
+            print(f"  {rate:>8,.0f}  {label:9} {cells[0]:<22} {cells[1]:<22} {cells[2]:<22}")
+        bare_rows, rec_rows = results[(rate, "bare")], results[(rate, "rec")]
+        for q in ("p50", "p99"):
+            ratios = [b[q] / a[q] for a, b in zip(bare_rows, rec_rows, strict=True)]
+            print(f"  {'':8}  recorder/bare {q}: {spread(ratios, '{:.1f}')}×")
+    worst = max(x["max"] for (_, who), rows in results.items() if who == "rec" for x in rows)
+    print(f"every line flushed within 20 ms of publishing: {'yes' if ok else 'NO'}", end="")
+    print(f" (worst {worst:.2f} ms)")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
