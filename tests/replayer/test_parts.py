@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import gzip
 import threading
 import time
 import tracemalloc
 from pathlib import Path
 
 import pytest
+import zstandard
 from replay_support import Line, MakeSession, write_session
 
 from fleetlog.cli.replay_terminal import format_status
@@ -29,6 +31,7 @@ from fleetlog.replayer.engine import Player, PlayOptions
 from fleetlog.replayer.inputs import open_inputs, parse_remote
 from fleetlog.replayer.report import Lateness, State, Status
 from fleetlog.transport.replay import parse_parameters
+from fleetlog.wire.message import MoosMessage
 
 # -- commands
 
@@ -216,20 +219,29 @@ def test_inputs_find_their_vehicle(make_session: MakeSession) -> None:
         open_inputs(["alpha:latest"])
 
 
-def test_alog_file_and_compressed_input(make_session: MakeSession) -> None:
-    import gzip
-
-    session = make_session([Line(1.0, "A", "p", 1.0)])
+@pytest.mark.parametrize("suffix", [".gz", ".zst"])
+def test_compressed_alogs(make_session: MakeSession, suffix: str) -> None:
+    session = make_session([Line(1.0, "A", "p", 1.0), Line(2.0, "B", "p", "two")])
     alog = next(session.glob("*.alog"))
-    gz = alog.with_name(alog.name + ".gz")
-    gz.write_bytes(gzip.compress(alog.read_bytes()))
+    data = alog.read_bytes()
+    packed = gzip.compress(data) if suffix == ".gz" else zstandard.ZstdCompressor().compress(data)
+    alog.with_name(alog.name + suffix).write_bytes(packed)
     alog.unlink()
-    (source,) = open_inputs([gz])
-    try:
-        assert source.vehicle == "alpha"
-        assert source.end is None  # compressed: not known without reading it all
-    finally:
-        source.close()
+    sent: list[str] = []
+
+    def collect(_vehicle: str, message: MoosMessage) -> None:
+        sent.append(message.name)
+
+    for spec in (session, next(session.glob("*.alog*"))):  # the directory, or the file
+        (source,) = open_inputs([spec])
+        try:
+            assert source.vehicle == "alpha"
+            assert source.end is None  # compressed: not known without reading it all
+            sent.clear()
+            Player([source], collect, FakeClock()).run()
+            assert [n for n in sent if n != "PLAYBACK_DB_TIME"] == ["DB_TIME", "A", "B"]
+        finally:
+            source.close()
 
 
 def test_remote_specs(tmp_path: Path) -> None:
