@@ -26,14 +26,18 @@ _ZENOH = "Zenoh"
 Mode = Annotated[
     str | None,
     typer.Option(
-        "-m", "--mode", help="Zenoh session mode: peer (default) or client.",
+        "-m",
+        "--mode",
+        help="Zenoh session mode: peer (default) or client.",
         rich_help_panel=_ZENOH,
     ),
 ]
 Connect = Annotated[
     list[str] | None,
     typer.Option(
-        "-e", "--connect", metavar="ENDPOINT",
+        "-e",
+        "--connect",
+        metavar="ENDPOINT",
         help="Endpoint to connect to, e.g. tcp/192.168.1.10:7447 (repeatable).",
         rich_help_panel=_ZENOH,
     ),
@@ -41,7 +45,9 @@ Connect = Annotated[
 Listen = Annotated[
     list[str] | None,
     typer.Option(
-        "-l", "--listen", metavar="ENDPOINT",
+        "-l",
+        "--listen",
+        metavar="ENDPOINT",
         help="Endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable).",
         rich_help_panel=_ZENOH,
     ),
@@ -49,14 +55,18 @@ Listen = Annotated[
 Config = Annotated[
     Path | None,
     typer.Option(
-        "-c", "--config", metavar="FILE", help="A Zenoh JSON5 configuration file.",
+        "-c",
+        "--config",
+        metavar="FILE",
+        help="A Zenoh JSON5 configuration file.",
         rich_help_panel=_ZENOH,
     ),
 ]
 NoScouting = Annotated[
     bool,
     typer.Option(
-        "--no-multicast-scouting", help="Do not discover peers by multicast.",
+        "--no-multicast-scouting",
+        help="Do not discover peers by multicast.",
         rich_help_panel=_ZENOH,
     ),
 ]
