@@ -6,8 +6,9 @@ import os
 import signal
 import socket
 import sys
+from collections.abc import Callable
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, TypeAlias
 
 import typer
 
@@ -24,10 +25,15 @@ from fleetlog.cli.options import (
 )
 from fleetlog.errors import UsageError
 from fleetlog.moos.mission import LoggerConfig, parse_mission
+from fleetlog.query.server import LogServer
 from fleetlog.recorder.engine import Recorder
 from fleetlog.recorder.service import RecorderService, ServiceOptions
+from fleetlog.storage.catalog import LogCatalog
+from fleetlog.transport.queries import ZenohSession
 
 __all__ = ["load_config", "record"]
+
+Attach: TypeAlias = "Callable[[ZenohSession, Recorder], Callable[[], None]]"
 
 
 def load_config(mission: Path | None, app_name: str) -> LoggerConfig:
@@ -52,6 +58,30 @@ def load_config(mission: Path | None, app_name: str) -> LoggerConfig:
 
 def _default_vehicle() -> str:
     return socket.gethostname().split(".")[0] or "vehicle"
+
+
+def _log_server(root: str, vehicle: str, cfg: LoggerConfig) -> Attach:
+    """Serve the recorder's log root to shore through the query services."""
+
+    def attach(session: ZenohSession, recorder: Recorder) -> Callable[[], None]:
+        current = recorder.session
+        log_root = current.dir_path.parent if current is not None else Path.cwd() / cfg.path
+
+        def active() -> Path | None:
+            live = recorder.session
+            return live.dir_path if live is not None else None
+
+        hint = Path(cfg.logging_directory_summary_file)
+        catalog = LogCatalog(
+            log_root,
+            vehicle=vehicle,
+            active=active,
+            hint=hint if hint.is_absolute() else Path.cwd() / hint,
+        )
+        server = LogServer(session, catalog, root=root, vehicle=vehicle).start()
+        return server.close
+
+    return attach
 
 
 @app.command()
@@ -84,6 +114,12 @@ def record(
             ),
         ),
     ] = None,
+    no_serve: Annotated[
+        bool,
+        typer.Option(
+            "--no-serve", help="Do not serve the logs to shore (fleetlog fetch/query/sessions)."
+        ),
+    ] = False,
     root: Root = "fleet",
     mode: Mode = None,
     connect: Connect = None,
@@ -118,6 +154,7 @@ def record(
             zenoh=zopts,
             mission_path=mission_path,
             copy_dirs=tuple(dirs),
+            attach=None if no_serve else _log_server(key_root, veh, cfg),
         ),
     )
 

@@ -40,7 +40,7 @@ __all__ = ["RecorderService", "ServiceOptions"]
 
 #: more subscriptions than this become one subscription to every variable, filtered here
 MAX_SUBSCRIBERS = 8
-_FLUSH_DELAY = 0.01
+_FLUSH_DELAY = 0.005
 _TICK = 0.02
 
 
@@ -65,6 +65,10 @@ class ServiceOptions:
     mission_path: Path | None = None
     copy_dirs: tuple[Path, ...] = ()
     cwd: Path | None = None
+    #: started once the first session is open, with the Zenoh session and the recorder;
+    #: returns the function that stops it (the CLI attaches the log server here, so the
+    #: recorder layer does not depend on the query layer)
+    attach: Callable[[ZenohSession, Recorder], Callable[[], None]] | None = None
 
 
 class _Outbox:
@@ -152,6 +156,7 @@ class RecorderService:
         token: LivelinessToken | None = None
         status_q: ServiceQueryable | None = None
         recorder: Recorder | None = None
+        detach: Callable[[], None] | None = None
         try:
             recorder = Recorder(
                 self.config,
@@ -168,6 +173,8 @@ class RecorderService:
             token = declare_token(session, service_key(opts.root, opts.vehicle, "recorder"))
             status_q = self._declare_status(session, recorder)
             recorder.start()
+            if opts.attach is not None:
+                detach = opts.attach(session, recorder)
             self.ready.set()
             if on_ready is not None:
                 on_ready(recorder)
@@ -190,6 +197,9 @@ class RecorderService:
                         recorder.stop()
             finally:
                 # Whatever failed above, Zenoh is closed: a live session hangs the exit.
+                if detach is not None:
+                    with contextlib.suppress(FleetlogError):
+                        detach()
                 if status_q is not None:
                     status_q.undeclare()
                 if token is not None:

@@ -843,3 +843,27 @@ def test_no_session_directory_at_all_is_one_line_and_exit_1(
         r"or directory\) nor the fallback \./no/such_\S+ \(No such file or directory\)\n",
         done.stderr,
     )
+
+
+def test_running_recorder_serves_its_sessions_to_shore(
+    record: Callable[..., Recorder], tmp_path: Path, endpoint: str, cli_env: dict[str, str]
+) -> None:
+    rec = record("--vehicle", "delta")
+    done = poke(endpoint, tmp_path, cli_env, "NAV_X=4.25", "NOTE:=served live")
+    assert done.returncode == 0, done.stderr
+    connect = ("-e", endpoint, "--no-multicast-scouting")
+    listing = run_cli("sessions", "delta", "--json", *connect, cwd=tmp_path, env=cli_env)
+    assert listing.returncode == 0, listing.stderr
+    (directory,) = session_dirs(tmp_path)
+    assert directory.name in listing.stdout
+    assert '"complete": false' in listing.stdout  # the recorder says it is still writing
+    found = run_cli("query", "delta", "NAV_*", *connect, cwd=tmp_path, env=cli_env)
+    assert found.returncode == 0, found.stderr
+    lines = [line for line in found.stdout.splitlines() if line[:1].isdigit()]
+    assert len(lines) == 1
+    assert lines[0].split()[1:4] == ["NAV_X", "uPokeDB", "4.25000"]
+    assert rec.stop(signal.SIGINT) == 0
+    # stopped: nothing serves the vehicle any more, and shore says so in one line
+    gone = run_cli("sessions", "delta", *connect, "--timeout", "1", cwd=tmp_path, env=cli_env)
+    assert gone.returncode != 0
+    assert len(gone.stderr.strip().splitlines()) == 1, gone.stderr
