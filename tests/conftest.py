@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import os
-from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -25,10 +24,10 @@ def reference() -> Path:
 
 
 @pytest.fixture
-def cli_env() -> Iterator[dict[str, str]]:
+def cli_env() -> dict[str, str]:
     """Environment for CLI subprocesses: UTC, no colour."""
     env = dict(os.environ)
     env["TZ"] = "UTC"
     env["NO_COLOR"] = "1"
     env.pop("FORCE_COLOR", None)
-    yield env
+    return env

@@ -23,10 +23,16 @@ def fleetlog_cmd(*args: str) -> list[str]:
     return [sys.executable, "-m", "fleetlog", *args]
 
 
-def run_cli(*args: str, cwd: Path | None = None, env: dict[str, str] | None = None,
-            timeout: float = 30.0) -> subprocess.CompletedProcess[str]:
+def run_cli(
+    *args: str, cwd: Path | None = None, env: dict[str, str] | None = None, timeout: float = 30.0
+) -> subprocess.CompletedProcess[str]:
     """Run ``fleetlog ARGS`` to completion and return its result."""
     return subprocess.run(
-        fleetlog_cmd(*args), cwd=cwd, env=env, capture_output=True, text=True, timeout=timeout,
+        fleetlog_cmd(*args),
+        cwd=cwd,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=timeout,
         check=False,
     )
