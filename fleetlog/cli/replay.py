@@ -311,7 +311,12 @@ def _run(
         markup=False,
     )
 
+    stopping: list[int] = []
+
     def on_signal(signum: int, frame: object) -> None:
+        if stopping:
+            raise KeyboardInterrupt  # a second Ctrl-C: do not wait for the end of the replay
+        stopping.append(signum)
         player.stop()
 
     signal.signal(signal.SIGINT, on_signal)

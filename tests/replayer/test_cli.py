@@ -2,11 +2,13 @@
 
 from __future__ import annotations
 
+import re
+import time
 from pathlib import Path
 
 import pytest
 from helpers import run_cli
-from replay_support import Line, MakeSession
+from replay_support import Line, MakeSession, Proc
 from typer.testing import CliRunner
 
 from fleetlog.cli.app import app
@@ -102,3 +104,19 @@ def test_parse_when(text: str, expected: tuple[float, bool]) -> None:
 def test_parse_when_refuses(text: str) -> None:
     with pytest.raises(UsageError, match="--from"):
         parse_when(text, "--from")
+
+
+def test_sigint_stops_with_a_summary(
+    make_session: MakeSession, tmp_path: Path, cli_env: dict[str, str]
+) -> None:
+    session = make_session([Line(1.0 + i, f"V{i}", "p", float(i)) for i in range(30)])
+    proc = Proc(["replay", str(session), *ISOLATED], tmp_path, cli_env)
+    try:
+        proc.wait_for("replaying 1 input(s) as alpha")
+        time.sleep(1.2)  # about two entries are out (DB_TIME at 0, V0 at 1.0)
+        assert proc.stop() == 0
+        found = re.search(r"fleetlog: stopped: published (\d+) entries", proc.stderr)
+        assert found is not None, proc.stderr
+        assert 1 <= int(found.group(1)) < 10
+    finally:
+        proc.close()
