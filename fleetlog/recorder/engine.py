@@ -209,6 +209,9 @@ class Recorder:
             text = self.synclog.start(session.banner(".slog", now), now - self.logstart)
             self._write_slog(text)
         self.post("LOGGER_DIRECTORY", session.directory)
+        # Posted at once (not only every 2 s): its Community field names the vehicle in a
+        # session that has no mission copy and no MOOSDB's DB_TIME (replay, serve read it).
+        self.post(self.app_name.upper() + "_STATUS", self.status_text(now))
         return session
 
     def restart(self) -> None:
@@ -538,7 +541,8 @@ class Recorder:
         directory = self.session.directory if self.session else ""
         return (
             f"AppErrorFlag={'true' if s.lost else 'false'},Uptime={now - self.started:.6g},"
-            f"MOOSName={self.app_name},LogAuxSrc={'true' if self.config.log_aux_src else 'false'},"
+            f"MOOSName={self.app_name},Community={self.vehicle},"
+            f"LogAuxSrc={'true' if self.config.log_aux_src else 'false'},"
             f"Received={s.received},Logged={s.logged},Excluded={s.excluded},"
             f"Throttled={s.throttled},Skewed={s.skewed},Garbled={s.garbled},Lost={s.lost},"
             f"WriteErrors={s.write_errors},Sessions={s.sessions},Directory={directory}"

@@ -41,6 +41,8 @@ __all__ = [
     "parse_remote",
 ]
 
+#: The vehicle in a fleetlog recorder's status line (``...,Community=alpha,...``).
+STATUS_COMMUNITY = re.compile(r"(?:^|,)Community=([^,]*)")
 #: Entries scanned for a ``DB_TIME`` line from ``MOOSDB_<V>`` when looking for the vehicle.
 VEHICLE_SCAN_ENTRIES = 5000
 #: Bytes read from the end of a plain alog to find its last entry time.
@@ -134,33 +136,42 @@ def _moos_community(alog: Path) -> str | None:
         return None
 
 
-def _db_time_community(reader: AlogReader) -> str | None:
-    """Return ``V`` of the first ``DB_TIME`` posted by ``MOOSDB_<V>`` among the first entries."""
+def _db_time_community(reader: AlogReader) -> tuple[str, str] | None:
+    """Return ``V`` of the first ``DB_TIME`` posted by ``MOOSDB_<V>`` among the first entries.
+
+    Failing that, the ``Community=V`` field of a fleetlog recorder's ``<APP>_STATUS`` (a
+    session recorded without a mission has no ``._moos`` and no MOOSDB).
+    """
     entries = reader.entries()
+    status: str | None = None
     try:
         for entry in itertools.islice(entries, VEHICLE_SCAN_ENTRIES):
             if entry.key == "DB_TIME" and entry.source.startswith("MOOSDB_"):
                 community = entry.source[len("MOOSDB_") :]
                 if community:
-                    return community
+                    return community, "DB_TIME"
+            elif status is None and entry.key.endswith("_STATUS") and isinstance(entry.value, str):
+                found = STATUS_COMMUNITY.search(entry.value)
+                if found and found.group(1):
+                    status = found.group(1)
     finally:
         close = getattr(entries, "close", None)
         if close is not None:
             close()
-    return None
+    return (status, "status") if status is not None else None
 
 
 def detect_vehicle(reader: AlogReader) -> tuple[str, str] | None:
-    """Return ``(vehicle, how)`` for an alog from its DB_TIME lines or its ``._moos``.
+    """Return ``(vehicle, how)`` for an alog from its DB_TIME or status lines or its ``._moos``.
 
     Raises:
         FormatError: (a ``"raise"`` reader) a malformed line among the entries scanned;
             better said now, naming the file and line, than as "no vehicle".
         StorageError: the alog cannot be read.
     """
-    community = _db_time_community(reader)
-    if community is not None:
-        return community, "DB_TIME"
+    found = _db_time_community(reader)
+    if found is not None:
+        return found
     community = _moos_community(reader.path)
     if community is not None:
         return community, "._moos"

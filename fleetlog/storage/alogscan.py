@@ -44,6 +44,7 @@ _KEY_COLUMN = re.compile(
     rb"\n[-0-9][0-9.]{0,14} +(?<=\n.{16})"
     rb"([^ \n]{21,}(?= [^ \n])|[^ \n]{1,20} +(?<=\n.{37})(?=[^ \n]))"
 )
+_STATUS_COMMUNITY = re.compile(r"[ ,]Community=([^,]*)")
 _COMMUNITY = re.compile(r"MOOSDB_(\S+)")
 
 
@@ -99,6 +100,7 @@ def read_head(path: Path) -> HeadInfo:
         banner = None
     decimals: int | None = None
     community: str | None = None
+    status: str | None = None
     for line in lines[len(banner_lines) :]:
         match = _ENTRY.match(line.encode("utf-8", "surrogateescape") + b"\n")
         if match is None or not _shaped(match):
@@ -112,7 +114,12 @@ def read_head(path: Path) -> HeadInfo:
             if found:
                 community = found.group(1)
                 break
-    return HeadInfo(banner, tuple(banner_lines), decimals, community)
+        elif status is None and fields[1].endswith("_STATUS"):
+            # A fleetlog recorder's status names the vehicle when no MOOSDB posted DB_TIME.
+            named = _STATUS_COMMUNITY.search(line.rstrip(" "))
+            if named and named.group(1):
+                status = named.group(1)
+    return HeadInfo(banner, tuple(banner_lines), decimals, community or status)
 
 
 def _last_entry_time(data: bytes) -> float | None:

@@ -306,10 +306,12 @@ def test_status_counters(rigs: Callable[..., Rig]) -> None:
     rig.send("D", b"\xff", at=1.0, garbled=True)
     rig.clock.at(2.0)
     rig.rec.tick()
-    (status,) = rig.take("PLOGGER_STATUS")
+    first, status = rig.take("PLOGGER_STATUS")  # one at session start, one 2 s later
+    assert "Received=0," in str(first.value)
     fields = dict(item.split("=", 1) for item in str(status.value).split(","))
     assert fields["AppErrorFlag"] == "false"
     assert fields["MOOSName"] == "pLogger"
+    assert fields["Community"] == rig.rec.vehicle
     assert fields["LogAuxSrc"] == "true"
     assert fields["Received"] == "6"
     assert fields["Logged"] == "4"
@@ -601,7 +603,9 @@ def test_logger_restart_opens_a_complete_new_session(
     old = rig.entries(path=old_dir / f"{old_root}.alog")
     assert (old[-1].key, old[-1].value) == ("LOGGER_RESTART", "true")
     assert "Closing" not in (old_dir / f"{old_root}.alog").read_text()
-    assert [e.key for e in rig.entries(path=old_dir / f"{old_root}.xlog")] == ["FOO_STATUS"]
+    excluded = [e.key for e in rig.entries(path=old_dir / f"{old_root}.xlog")]
+    # the recorder's own status (posted at session start) is omitted by *_STATUS too
+    assert [k for k in excluded if k != "PLOGGER_STATUS"] == ["FOO_STATUS"]
 
     # every file reopened: the xlog and blog too (pLogger lost them), plus the mission copy
     rig.send("BIN", b"fedcba9876543210", at=0.75)
@@ -624,7 +628,7 @@ def test_logger_restart_opens_a_complete_new_session(
     assert isinstance(ref, BinaryRef)
     assert payload_at(rig.file(".blog").read_bytes(), ref) == b"fedcba9876543210"
     assert next(e.offset for e in new if e.key == "BIN") == 0.25  # relative to the new LOGSTART
-    assert [e.key for e in rig.entries(".xlog")] == ["FOO_STATUS"]
+    assert [e.key for e in rig.entries(".xlog") if e.key != "PLOGGER_STATUS"] == ["FOO_STATUS"]
 
     # a fresh LOGSTART, right-aligned in every banner
     banner = format_banner(
@@ -712,7 +716,9 @@ def test_command_variable_follows_the_app_name(rigs: Callable[..., Rig]) -> None
     rig.send("X", 1.0, at=2.0)
     rig.send("Y", 2.0, at=2.0)
     assert [e.key for e in rig.entries()] == ["Y"]
-    assert rig.take("PLOGGER_B_STATUS") == []
+    assert rig.take("PLOGGER_STATUS") == []
+    (status,) = rig.take("PLOGGER_B_STATUS")  # the one posted when the session opened
+    assert "MOOSName=pLogger_B," in str(status.value)
 
 
 def test_log_request_duplicate_posts_plogger_text(rigs: Callable[..., Rig]) -> None:
@@ -1062,7 +1068,7 @@ def test_restart_into_an_unwritable_place_counts_losses_until_it_recovers(
     assert rig.rec.stats.lost == 6
     rig.clock.at(2.0)
     rig.rec.tick()
-    (status,) = rig.take("PLOGGER_STATUS")
+    *_, status = rig.take("PLOGGER_STATUS")
     assert "AppErrorFlag=true" in str(status.value)
     assert "Lost=6" in str(status.value)
 

@@ -30,6 +30,7 @@ from fleetlog.replayer.control import (
 from fleetlog.replayer.engine import Player, PlayOptions
 from fleetlog.replayer.inputs import open_inputs, parse_remote
 from fleetlog.replayer.report import Lateness, State, Status
+from fleetlog.storage.alogscan import read_head
 from fleetlog.transport.replay import parse_parameters
 from fleetlog.wire.message import MoosMessage
 
@@ -217,6 +218,21 @@ def test_inputs_find_their_vehicle(make_session: MakeSession) -> None:
         open_inputs([])
     with pytest.raises(ReplayError, match="a remote input, but no way to fetch it"):
         open_inputs(["alpha:latest"])
+
+
+def test_a_fleetlog_session_without_mission_names_its_vehicle(make_session: MakeSession) -> None:
+    # What `fleetlog record` writes with no mission: no DB_TIME, no ._moos, but its status.
+    status = "AppErrorFlag=false,Uptime=0,MOOSName=pLogger,Community=charlie,LogAuxSrc=false"
+    bare = make_session(
+        [Line(0.0, "PLOGGER_STATUS", "pLogger", status), Line(1.0, "A", "p", 1.0)], vehicle=None
+    )
+    (found,) = open_inputs([bare])
+    try:
+        assert (found.vehicle, found.vehicle_from) == ("charlie", "status")
+    finally:
+        found.close()
+    head = read_head(next(bare.glob("*.alog")) if bare.is_dir() else bare)
+    assert head.community == "charlie"
 
 
 @pytest.mark.parametrize("suffix", [".gz", ".zst"])
