@@ -17,12 +17,10 @@ stall; losses are then possible.
 
 from __future__ import annotations
 
-import time
 from types import TracebackType
-from typing import Any
 
 from fleetlog.errors import QueryError
-from fleetlog.transport.bus import MoosPublisher
+from fleetlog.transport.bus import MoosPublisher, wait_for_subscriber
 from fleetlog.transport.queries import ZenohSession
 from fleetlog.transport.services import get_replies, live_vehicles
 from fleetlog.transport.session import SessionOptions, open_session
@@ -45,15 +43,6 @@ def find_recorder(session: ZenohSession, root: str = DEFAULT_ROOT, timeout: floa
         msg = f"several recorders are reachable ({', '.join(vehicles)}); choose one with --vehicle"
         raise QueryError(msg)
     return vehicles[0]
-
-
-def _matching(status: Any) -> bool:
-    """Whether a publisher's ``matching_status`` says a subscriber matches its key.
-
-    zenoh's stub says ``matching_status`` is a bool, but at run time it is a MatchingStatus,
-    which is always truthy: read its ``matching`` field.
-    """
-    return bool(getattr(status, "matching", status))
 
 
 class Vehicle:
@@ -108,17 +97,7 @@ class Vehicle:
         A put made before the subscription is known goes nowhere, so short-lived publishers
         (``fleetlog poke``) wait first.
         """
-        key = var_key(self.root, self.vehicle, name)
-        pub = self.session.declare_publisher(key)
-        try:
-            deadline = time.monotonic() + timeout
-            while not _matching(pub.matching_status):
-                if time.monotonic() > deadline:
-                    return False
-                time.sleep(0.005)
-            return True
-        finally:
-            pub.undeclare()
+        return wait_for_subscriber(self.session, var_key(self.root, self.vehicle, name), timeout)
 
     def confirm(self, timeout: float = 5.0) -> bool:
         """Wait until the vehicle's recorder has received everything published so far.

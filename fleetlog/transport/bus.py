@@ -10,6 +10,7 @@ import contextlib
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Any
 
 import zenoh
 
@@ -157,6 +158,39 @@ def _new_incoming(key: str, message: MoosMessage, stamped: bool, garbled: bool) 
     return incoming
 
 
+def matching(pub: zenoh.Publisher) -> bool:
+    """Whether a subscriber matches a publisher's key right now.
+
+    zenoh's stub says ``matching_status`` is a bool, but at run time it is a MatchingStatus,
+    which is always truthy: its ``matching`` field is the answer.
+    """
+    status: Any = pub.matching_status
+    return bool(getattr(status, "matching", status))
+
+
+def wait_for_subscriber(session: zenoh.Session, key: str, timeout: float) -> bool:
+    """Wait until something subscribes to ``key``; False after ``timeout`` seconds.
+
+    A put made before the subscription is known goes nowhere, so short-lived publishers
+    wait first.
+
+    Raises:
+        TransportError: the key is invalid.
+    """
+    with translate_zerror(f"publisher on {key!r}"):
+        pub = session.declare_publisher(key)
+    try:
+        deadline = time.monotonic() + timeout
+        while not matching(pub):
+            if time.monotonic() > deadline:
+                return False
+            time.sleep(0.005)
+        return True
+    finally:
+        with contextlib.suppress(zenoh.ZError):
+            pub.undeclare()
+
+
 def declare_fifo_subscriber(
     session: zenoh.Session, key_expr: str, capacity: int = 65536
 ) -> zenoh.Subscriber[zenoh.handlers.Handler[zenoh.Sample]]:
@@ -219,6 +253,26 @@ class MoosPublisher:
             self._publishers[(key, kind)] = pub
         return pub
 
+    def _key(self, vehicle: str, name: str) -> str:
+        key = self._keys.get((vehicle, name))
+        if key is None:
+            key = var_key(self._root, vehicle, name)
+            if len(self._keys) > 65536:
+                self._keys.clear()
+            self._keys[(vehicle, name)] = key
+        return key
+
+    def prepare(self, name: str, kind: Kind, vehicle: str | None = None) -> None:
+        """Declare a variable's publisher before its first publication.
+
+        A declaration costs about a millisecond; a replay prepares while it waits for an
+        entry's time rather than when the entry is due.
+
+        Raises:
+            TransportError: the declaration failed.
+        """
+        self._publisher(self._key(self.vehicle if vehicle is None else vehicle, name), kind)
+
     def close(self) -> None:
         """Undeclare the publishers (the session stays open)."""
         publishers = list(self._publishers.values())
@@ -256,12 +310,7 @@ class MoosPublisher:
         """
         kind, payload = encode_value(value)
         veh = self.vehicle if vehicle is None else vehicle
-        key = self._keys.get((veh, name))
-        if key is None:
-            key = var_key(self._root, veh, name)
-            if len(self._keys) > 65536:
-                self._keys.clear()
-            self._keys[(veh, name)] = key
+        key = self._key(veh, name)
         attachment = encode_attachment(
             self._clock() if time is None else time,
             self.source if source is None else source,

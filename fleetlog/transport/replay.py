@@ -26,18 +26,16 @@ from typing import Any
 
 import zenoh
 
-from fleetlog.errors import FormatError, QueryError, TransportError
+from fleetlog.errors import FormatError, QueryError
+from fleetlog.transport.bus import MoosPublisher, matching
 from fleetlog.transport.services import get_replies
 from fleetlog.transport.session import translate_zerror
 from fleetlog.wire.keys import service_key, var_key
 from fleetlog.wire.message import (
-    ENCODINGS,
     Kind,
     MoosMessage,
     decode_attachment,
     decode_value,
-    encode_attachment,
-    encode_value,
     kind_of_encoding,
 )
 
@@ -46,9 +44,6 @@ __all__ = ["CHOKE_VARIABLE", "ReplayLink", "parse_parameters"]
 #: The variable a client posts its heartbeat to (uPlayBack's PLAYBACK_CHOKE).
 CHOKE_VARIABLE = "PLAYBACK_CHOKE"
 _JSON = zenoh.Encoding("application/json")
-_ENCODINGS = {kind: zenoh.Encoding(text) for kind, text in ENCODINGS.items()}
-#: Declared publishers kept at most (a log with more variables re-declares as it goes).
-_MAX_PUBLISHERS = 4096
 _SEPARATORS = re.compile(r"[;&]")
 
 #: ``handler(parameters) -> status document``; raises a FleetlogError to refuse.
@@ -65,12 +60,6 @@ def parse_parameters(text: str) -> dict[str, str]:
     return out
 
 
-def _matching(pub: zenoh.Publisher) -> bool:
-    # The stubs say bool, the runtime returns a MatchingStatus that is always truthy.
-    status: Any = pub.matching_status
-    return bool(getattr(status, "matching", status))
-
-
 class ReplayLink:
     """Publishes a replay's messages and serves its control and status over one session.
 
@@ -84,32 +73,14 @@ class ReplayLink:
         self.session = session
         self.root = root
         self.vehicles = tuple(dict.fromkeys(vehicles))
-        self._publishers: dict[tuple[str, str, Kind], zenoh.Publisher] = {}
+        self._data = MoosPublisher(session, root, self.vehicles[0] if self.vehicles else "")
         self._declared: list[Any] = []
         self._status_pubs: list[zenoh.Publisher] = []
 
     # -- data
 
-    # The same puts as MoosPublisher.send (docs/wire.md), plus prepare(): the player declares
-    # a variable's publisher while it waits, not when the entry is due (a declaration costs
-    # about a millisecond, half the timing budget).
-
-    def _publisher(self, vehicle: str, name: str, kind: Kind) -> zenoh.Publisher:
-        sig = (vehicle, name, kind)
-        pub = self._publishers.get(sig)
-        if pub is None:
-            if len(self._publishers) >= _MAX_PUBLISHERS:
-                self._undeclare_publishers()
-            key = var_key(self.root, vehicle, name)
-            with translate_zerror(f"publisher on {key!r}"):
-                pub = self.session.declare_publisher(
-                    key,
-                    encoding=_ENCODINGS[kind],
-                    congestion_control=zenoh.CongestionControl.BLOCK,
-                    reliability=zenoh.Reliability.RELIABLE,
-                )
-            self._publishers[sig] = pub
-        return pub
+    # The puts of MoosPublisher (docs/wire.md), with prepare(): the player declares a
+    # variable's publisher while it waits, not when the entry is due.
 
     def prepare(self, vehicle: str, name: str, kind: Kind) -> None:
         """Declare the publisher of a variable before its first publication.
@@ -117,7 +88,7 @@ class ReplayLink:
         Raises:
             TransportError: the declaration failed.
         """
-        self._publisher(vehicle, name, kind)
+        self._data.prepare(name, kind, vehicle)
 
     def publish(self, vehicle: str, message: MoosMessage) -> None:
         """Publish one message under ``vehicle`` (BLOCK, reliable).
@@ -127,27 +98,7 @@ class ReplayLink:
         Raises:
             TransportError: Zenoh refused the put.
         """
-        kind, payload = encode_value(message.value)
-        attachment = encode_attachment(
-            message.time,
-            message.source,
-            message.aux,
-            message.community or vehicle,
-            message.original_time,
-        )
-        pub = self._publisher(vehicle, message.name, kind)
-        try:
-            pub.put(payload, attachment=attachment)
-        except zenoh.ZError as err:
-            msg = f"could not publish {message.name!r} of {vehicle!r}: {err}"
-            raise TransportError(msg) from err
-
-    def _undeclare_publishers(self) -> None:
-        publishers = list(self._publishers.values())
-        self._publishers.clear()
-        for pub in publishers:
-            with contextlib.suppress(zenoh.ZError):
-                pub.undeclare()
+        self._data.send(message, vehicle)
 
     def wait_for_subscribers(self, timeout: float) -> list[str]:
         """Wait until every vehicle's variables have a subscriber; return those without one.
@@ -162,7 +113,7 @@ class ReplayLink:
         try:
             deadline = time.monotonic() + timeout
             while True:
-                missing = [v for v, pub in pubs.items() if not _matching(pub)]
+                missing = [v for v, pub in pubs.items() if not matching(pub)]
                 if not missing or time.monotonic() >= deadline:
                     return missing
                 time.sleep(0.01)
@@ -267,4 +218,4 @@ class ReplayLink:
         for entity in self._declared:
             entity.undeclare()
         self._declared.clear()
-        self._undeclare_publishers()
+        self._data.close()
