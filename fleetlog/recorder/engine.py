@@ -13,7 +13,7 @@ import contextlib
 import dataclasses
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 from fleetlog.errors import FleetlogError, MissionError, StorageError
@@ -81,7 +81,6 @@ class _Timers:
 class _Commands:
     restart: str = "LOGGER_RESTART"
     command: str = "PLOGGER_CMD"
-    extra: set[str] = field(default_factory=set)
 
 
 class Recorder:
