@@ -4,6 +4,11 @@ Plain files are flushed to the OS by the recorder within 20 ms of a line's arriv
 streams cannot be flushed that often without wrecking the ratio, so they close a unit at least
 once a second: a zstd frame (every complete frame is readable after a crash) or a gzip
 ``Z_SYNC_FLUSH`` point (what pLogger's zipper does every 2048 bytes).
+
+Text is held in memory as written and encoded once per flush, joined: the recorder writes a
+line per sample, and one ``write`` per flush instead of an encode and a buffered write per
+line saves about a quarter of :meth:`Recorder.handle <fleetlog.recorder.engine.Recorder.handle>`.
+The bytes are the same, and they reach the OS at the same flushes as with a buffered file.
 """
 
 from __future__ import annotations
@@ -11,6 +16,7 @@ from __future__ import annotations
 import contextlib
 import os
 import zlib
+from collections.abc import Callable
 from pathlib import Path
 from typing import BinaryIO, NoReturn
 
@@ -39,13 +45,37 @@ def _close_quietly(raw: BinaryIO) -> None:
 
 
 class OutStream:
-    """A log file opened for appending text (UTF-8, surrogates escaped)."""
+    """A log file opened for appending text (UTF-8, surrogates escaped).
+
+    ``write`` only collects the text; it reaches the file at :meth:`flush` or :meth:`close`,
+    which raise the write errors.
+    """
 
     path: Path
+    #: Append text (kept until the next flush). It is the bound ``append`` of the list of
+    #: pending text: a line per sample is the recorder's hot path, and a method would add a
+    #: Python call to it.
+    write: Callable[[str], None]
 
-    def write(self, text: str) -> None:
-        """Append text."""
-        raise NotImplementedError
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._text: list[str] = []
+        self.write = self._text.append
+
+    def _take(self) -> bytes:
+        """Return the text written since the last call, encoded, and forget it."""
+        text = self._text
+        if not text:
+            return b""
+        joined = "".join(text)
+        # Cleared before the caller writes it: after a failed write the text is not added
+        # again to the next one (the recorder counted its samples lost with that error).
+        text.clear()
+        try:
+            return joined.encode("utf-8", "surrogateescape")
+        except UnicodeEncodeError:
+            # A surrogate that stands for no byte (never from the wire, which is strict UTF-8)
+            return joined.encode("utf-8", "surrogatepass")
 
     def flush(self, now: float) -> None:
         """Hand what was written to the OS (compressed streams: when their interval is due)."""
@@ -60,21 +90,24 @@ class PlainStream(OutStream):
     """An uncompressed file."""
 
     def __init__(self, path: Path) -> None:
-        self.path = path
+        super().__init__(path)
         try:
             self._file: BinaryIO = open(path, "wb", buffering=_BUFFER)  # noqa: SIM115
         except OSError as err:
             _fail("create", path, err)
 
-    def write(self, text: str) -> None:
-        """Append text."""
-        try:
-            self._file.write(text.encode("utf-8", "surrogateescape"))
-        except OSError as err:
-            _fail("write", self.path, err)
+    def _spill(self) -> None:
+        """Move the pending text into the file's buffer (before bytes, offsets or a flush)."""
+        data = self._take()
+        if data:
+            try:
+                self._file.write(data)
+            except OSError as err:
+                _fail("write", self.path, err)
 
     def write_bytes(self, data: bytes) -> None:
-        """Append raw bytes."""
+        """Append raw bytes (after any text written before them)."""
+        self._spill()
         try:
             self._file.write(data)
         except OSError as err:
@@ -82,10 +115,12 @@ class PlainStream(OutStream):
 
     def tell(self) -> int:
         """Return the current size of what was written."""
+        self._spill()
         return self._file.tell()
 
     def patch(self, offset: int, data: bytes) -> None:
         """Overwrite bytes already written (the slog's in-place column claim)."""
+        self._spill()
         try:
             self._file.flush()
             os.pwrite(self._file.fileno(), data, offset)
@@ -93,7 +128,8 @@ class PlainStream(OutStream):
             _fail("write", self.path, err)
 
     def flush(self, now: float) -> None:
-        """Hand buffered bytes to the OS."""
+        """Hand what was written to the OS."""
+        self._spill()
         try:
             self._file.flush()
         except OSError as err:
@@ -101,6 +137,11 @@ class PlainStream(OutStream):
 
     def close(self) -> None:
         """Flush and close."""
+        try:
+            self._spill()
+        except StorageError:
+            _close_quietly(self._file)
+            raise
         try:
             self._file.close()
         except OSError as err:
@@ -111,7 +152,7 @@ class ZstdStream(OutStream):
     """A zstd file made of frames, one closed at least every second."""
 
     def __init__(self, path: Path, level: int = 3) -> None:
-        self.path = path
+        super().__init__(path)
         try:
             self._raw: BinaryIO = open(path, "wb")  # noqa: SIM115
         except OSError as err:
@@ -122,16 +163,19 @@ class ZstdStream(OutStream):
         self._dirty = False
         self._last = 0.0
 
-    def write(self, text: str) -> None:
-        """Append text."""
-        try:
-            self._writer.write(text.encode("utf-8", "surrogateescape"))
-        except OSError as err:
-            _fail("write", self.path, err)
-        self._dirty = True
+    def _spill(self) -> None:
+        """Feed the pending text to the compressor (it stays in the current frame)."""
+        data = self._take()
+        if data:
+            try:
+                self._writer.write(data)
+            except OSError as err:
+                _fail("write", self.path, err)
+            self._dirty = True
 
     def flush(self, now: float) -> None:
         """Close the current frame if a second has passed since the last one."""
+        self._spill()
         if self._dirty and now - self._last >= COMPRESSED_FLUSH_INTERVAL:
             self._end_frame()
             self._last = now
@@ -147,6 +191,7 @@ class ZstdStream(OutStream):
     def close(self) -> None:
         """End the last frame and close."""
         try:
+            self._spill()
             if self._dirty:
                 self._end_frame()
             self._writer.close()  # type: ignore[no-untyped-call]  # zstandard's stub
@@ -166,7 +211,7 @@ class GzipStream(OutStream):
     """A single gzip member with sync-flush points, as pLogger's zipper writes."""
 
     def __init__(self, path: Path) -> None:
-        self.path = path
+        super().__init__(path)
         try:
             self._raw: BinaryIO = open(path, "wb")  # noqa: SIM115
         except OSError as err:
@@ -181,13 +226,16 @@ class GzipStream(OutStream):
         except OSError as err:
             _fail("write", self.path, err)
 
-    def write(self, text: str) -> None:
-        """Append text."""
-        self._out(self._zip.compress(text.encode("utf-8", "surrogateescape")))
-        self._dirty = True
+    def _spill(self) -> None:
+        """Feed the pending text to the compressor (it stays before the next sync point)."""
+        data = self._take()
+        if data:
+            self._out(self._zip.compress(data))
+            self._dirty = True
 
     def flush(self, now: float) -> None:
         """Make everything so far decompressible if a second has passed."""
+        self._spill()
         if self._dirty and now - self._last >= COMPRESSED_FLUSH_INTERVAL:
             self._out(self._zip.flush(zlib.Z_SYNC_FLUSH))
             try:
@@ -200,6 +248,7 @@ class GzipStream(OutStream):
     def close(self) -> None:
         """Finish the gzip member and close."""
         try:
+            self._spill()
             self._out(self._zip.flush(zlib.Z_FINISH))
         except StorageError:
             _close_quietly(self._raw)
