@@ -469,6 +469,8 @@ class Recorder:
         if requested.endswith("/") or not resolved.is_file():
             self.debug("failed to open file for reading")
             return
+        # A large copy takes a while: the lines already written reach the OS first.
+        self.flush()
         if self.session is None:
             self.debug("failed to open file for writing")
             return

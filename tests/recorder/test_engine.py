@@ -778,6 +778,17 @@ def test_copy_file_request(rigs: Callable[..., Rig], tmp_path: Path) -> None:
     ]
 
 
+def test_lines_reach_the_os_before_a_copy_starts(rigs: Callable[..., Rig], tmp_path: Path) -> None:
+    (tmp_path / "mission" / "big.bin").write_bytes(b"x" * 1000)
+    rig = rigs("Log = A @ 0")
+    rig.send("A", 1.0, at=0.5)
+    alog = rig.file(".alog")
+    assert b" A " not in alog.read_bytes()  # written, not flushed yet
+    rig.cmd("COPY_FILE_REQUEST = mission/big.bin", at=0.5)
+    assert b" A " in alog.read_bytes()  # a long copy does not hold it back
+    assert (rig.dir / "big._bin").stat().st_size == 1000
+
+
 # --------------------------------------------------------------------------------------------
 # What goes into a line
 
