@@ -82,6 +82,37 @@ def loadavg() -> str:
         return "?"
 
 
+class CpuMeter:
+    """How busy the machine's CPUs were between two readings of ``/proc/stat``.
+
+    ``busy`` is the share of all CPU time spent running anything (ours and other users'),
+    ``steal`` the share the hypervisor gave to other guests: both stall the recorder in ways
+    it cannot control.
+    """
+
+    def __init__(self) -> None:
+        self._start = self._read()
+
+    @staticmethod
+    def _read() -> list[int]:
+        try:
+            with open("/proc/stat") as f:
+                return [int(x) for x in f.readline().split()[1:]]
+        except (OSError, ValueError):
+            return []
+
+    def shares(self) -> tuple[float, float]:
+        """Return (busy, steal) as fractions of the time since the meter started."""
+        end = self._read()
+        if not end or len(end) != len(self._start):
+            return float("nan"), float("nan")
+        delta = [b - a for a, b in zip(self._start, end, strict=True)]
+        total = sum(delta[:8]) or 1  # user nice system idle iowait irq softirq steal
+        idle = delta[3] + delta[4]
+        steal = delta[7] if len(delta) > 7 else 0
+        return (total - idle - steal) / total, steal / total
+
+
 class Helper:
     """A helper process of this file, talking JSON lines on stdout and commands on stdin."""
 

@@ -28,6 +28,7 @@ from pathlib import Path
 
 from benchlib import (
     END,
+    CpuMeter,
     Helper,
     RecorderProcess,
     Tail,
@@ -143,7 +144,9 @@ def main() -> int:
                 bare = run_bare(rate, n, args.keys)
                 rundir = Path(tmp) / f"r{r}-{int(rate)}"
                 rundir.mkdir()
+                meter = CpuMeter()
                 rec = run_recorder(rate, n, args.keys, rundir, args.poll)
+                rec["busy"], rec["steal"] = meter.shares()
                 results.setdefault((rate, "bare"), []).append(bare)
                 results.setdefault((rate, "rec"), []).append(rec)
                 if rec["missing"] or rec["lost"] or rec["max"] > BOUND * 1e3:
@@ -153,7 +156,8 @@ def main() -> int:
                     f"p99 {bare['p99']:.3f} max {bare['max']:.2f} ms | recorder p50 "
                     f"{rec['p50']:.3f} p99 {rec['p99']:.3f} max {rec['max']:.2f} ms, "
                     f"{rec['over']:.2%} > 20 ms, missing {rec['missing']:.0f}, "
-                    f"lost {rec['lost']:.0f} (load {loadavg()})",
+                    f"lost {rec['lost']:.0f} (load {loadavg()}, CPUs {rec['busy']:.0%} busy, "
+                    f"{rec['steal']:.0%} stolen)",
                     flush=True,
                 )
     print()
@@ -168,6 +172,8 @@ def main() -> int:
         for q in ("p50", "p99"):
             ratios = [b[q] / a[q] for a, b in zip(bare_rows, rec_rows, strict=True)]
             print(f"  {'':8}  recorder/bare {q}: {spread(ratios, '{:.1f}')}×")
+        over = spread([x["over"] * 100 for x in rec_rows], "{:.2f}")
+        print(f"  {'':8}  recorder lines over 20 ms: {over} %")
     worst = max(x["max"] for (_, who), rows in results.items() if who == "rec" for x in rows)
     print(f"every line flushed within 20 ms of publishing: {'yes' if ok else 'NO'}", end="")
     print(f" (worst {worst:.2f} ms)")
