@@ -38,9 +38,10 @@ def _root(
 
 def main() -> None:
     """Run the CLI; any FleetlogError becomes one sentence on stderr and exit status 1."""
-    from fleetlog.cli import commands  # noqa: F401  (registers the commands)
-
     try:
+        # Inside the guard: a Ctrl-C while the commands (and zenoh) load is a quiet exit too.
+        from fleetlog.cli import commands  # noqa: F401  (registers the commands)
+
         app()
     except FleetlogError as err:
         print(f"fleetlog: error: {err}", file=sys.stderr)

@@ -1,0 +1,57 @@
+"""Bad input to every command: one sentence on stderr and a non-zero exit, never a traceback.
+
+Each test runs the installed CLI as a user would (a subprocess, loopback only) and holds in
+place one thing found wrong by trying the commands by hand.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from collections.abc import Iterator
+
+import pytest
+from helpers import free_port
+from replay_support import Proc
+
+ISOLATED = ["--no-multicast-scouting"]
+
+
+def loopback() -> str:
+    """A fresh loopback endpoint."""
+    return f"tcp/127.0.0.1:{free_port()}"
+
+
+def one_error(result: subprocess.CompletedProcess[str], *needles: str) -> str:
+    """Check a run ended in one ``fleetlog: error:`` line holding every needle; return it."""
+    assert result.returncode == 1, result.stderr
+    assert "Traceback" not in result.stderr, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1, result.stderr
+    assert lines[0].startswith("fleetlog: error: "), result.stderr
+    for needle in needles:
+        assert needle in lines[0], result.stderr
+    return lines[0]
+
+
+@pytest.fixture
+def procs() -> Iterator[list[Proc]]:
+    """Long-running fleetlog processes of one test, killed at its end whatever happened."""
+    started: list[Proc] = []
+    yield started
+    for proc in started:
+        proc.close()
+
+
+# -- Ctrl-C while the commands load ------------------------------------------------------------
+
+
+def test_the_entry_point_loads_nothing_before_its_ctrl_c_guard() -> None:
+    # A Ctrl-C while typer, rich and zenoh load printed a KeyboardInterrupt traceback: they
+    # were imported before main() set up its guard. Now importing the entry point is cheap.
+    code = "import sys, fleetlog.cli; print(sorted({'typer', 'zenoh', 'rich'} & set(sys.modules)))"
+    result = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=30, check=False
+    )
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.strip() == "[]"
