@@ -51,14 +51,18 @@ class SessionOptions:
         if self.mode is not None and self.mode not in _MODES:
             msg = f"--mode must be one of {', '.join(_MODES)}, not {self.mode!r}"
             raise TransportError(msg)
-        with translate_zerror("configuration"):
-            if self.config is not None:
-                if not self.config.is_file():
-                    msg = f"Zenoh configuration file {self.config} does not exist"
-                    raise TransportError(msg)
+        if self.config is not None:
+            if not self.config.is_file():
+                msg = f"Zenoh configuration file {self.config} does not exist"
+                raise TransportError(msg)
+            try:
                 conf = zenoh.Config.from_file(str(self.config))
-            else:
-                conf = zenoh.Config()
+            except zenoh.ZError as err:
+                msg = f"Zenoh configuration file {self.config} is not usable: {_clean(str(err))}"
+                raise TransportError(msg) from err
+        else:
+            conf = zenoh.Config()
+        with translate_zerror("configuration"):
             if self.mode is not None:
                 conf.insert_json5("mode", json.dumps(self.mode))
             if self.connect:
@@ -82,10 +86,16 @@ def translate_zerror(what: str) -> Iterator[None]:
 
 _MSG_RE = re.compile(r'msg: "(.*?)(?: at /[^"]*)?"')
 _AT_RE = re.compile(r"\s+at /\S+\.rs:\d+\.?")
+_PARSE_RE = re.compile(r"-->\s*(\d+):(\d+).*?\n\s*=\s*([^\n]*)", re.DOTALL)
 
 
 def _clean(text: str) -> str:
     """Keep the human part of a ZError: its inner message, without Rust source locations."""
+    parse = _PARSE_RE.search(text)
+    if parse is not None:
+        # A JSON5 syntax error: " --> 1:5 | <the line> | ^--- = expected ...".
+        line, column, expected = parse.groups()
+        return f"line {line}, column {column}: {_AT_RE.sub('', expected).strip()}"
     match = _MSG_RE.search(text)
     if match:
         text = match.group(1)

@@ -9,9 +9,10 @@ from __future__ import annotations
 import subprocess
 import sys
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
-from helpers import free_port
+from helpers import free_port, run_cli
 from replay_support import Proc
 
 ISOLATED = ["--no-multicast-scouting"]
@@ -41,6 +42,28 @@ def procs() -> Iterator[list[Proc]]:
     yield started
     for proc in started:
         proc.close()
+
+
+# -- mission files and Zenoh configuration files ----------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("text", "needle"),
+    [
+        ("not json {{{", "line 1, column 1: expected array"),
+        ("{mode: 1", "line 1, column 8: expected boolean"),
+        ("", "Empty config file"),
+        ('{mode: "bogus"}', "unknown variant `bogus`"),
+    ],
+)
+def test_a_bad_zenoh_config_file_is_named_with_where(
+    text: str, needle: str, tmp_path: Path, cli_env: dict[str, str]
+) -> None:
+    # Before: "Zenoh configuration failed: --> 1:1", neither the file nor what was wrong.
+    config = tmp_path / "zenoh.json5"
+    config.write_text(text)
+    result = run_cli("fleet", "-c", str(config), *ISOLATED, env=cli_env)
+    one_error(result, f"Zenoh configuration file {config} is not usable: {needle}")
 
 
 # -- Ctrl-C while the commands load ------------------------------------------------------------
