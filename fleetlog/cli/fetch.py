@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import sys
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
@@ -20,7 +21,7 @@ from rich.progress import (
 )
 
 from fleetlog.cli.app import app
-from fleetlog.cli.options import Config, Connect, Listen, Mode, NoScouting, Root
+from fleetlog.cli.options import Config, Connect, Listen, Mode, NoScouting, Root, checked_seconds
 from fleetlog.cli.shore import open_client
 from fleetlog.cli.tables import err_console, human_size
 from fleetlog.errors import FleetlogError, FormatError, QueryError, UsageError
@@ -105,11 +106,18 @@ def _report(outcome: fetching.FetchOutcome) -> str:
 @app.command()
 def fetch(
     vehicle: Annotated[
-        str | None, typer.Argument(help="The vehicle (its MOOS community).", show_default=False)
+        str | None,
+        typer.Argument(
+            metavar="VEHICLE", help="The vehicle (its MOOS community).", show_default=False
+        ),
     ] = None,
     session: Annotated[
         str | None,
-        typer.Argument(help="The session to fetch [default: the latest].", show_default=False),
+        typer.Argument(
+            metavar="SESSION",
+            help="The session to fetch [default: the latest].",
+            show_default=False,
+        ),
     ] = None,
     latest: Annotated[bool, typer.Option("--latest", help="Fetch the latest session.")] = False,
     every: Annotated[
@@ -133,7 +141,11 @@ def fetch(
     ] = False,
     rate: Annotated[
         float | None,
-        typer.Option("--rate", metavar="MB/S", help="Transfer at most this many MB/s per vehicle."),
+        typer.Option(
+            "--rate",
+            metavar="MB/S",
+            help="Transfer at most this many MB/s per vehicle [default: no limit].",
+        ),
     ] = None,
     retry_for: Annotated[
         float,
@@ -169,9 +181,10 @@ def fetch(
     if latest and session is not None:
         msg = f"give either --latest or a SESSION ({session}), not both"
         raise UsageError(msg)
-    if rate is not None and rate <= 0:
-        msg = f"--rate must be positive, not {rate}"
+    if rate is not None and not (math.isfinite(rate) and rate > 0):
+        msg = f"--rate must be a positive number of MB/s, not {rate:g}"
         raise UsageError(msg)
+    checked_seconds(retry_for, "--retry-for")
     try:
         if session is not None:
             check_component(session, "session")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from typing import Annotated
 
@@ -18,6 +19,8 @@ __all__ = [
     "Mode",
     "NoScouting",
     "Root",
+    "checked_seconds",
+    "checked_vehicle",
     "session_options",
 ]
 
@@ -28,7 +31,8 @@ Mode = Annotated[
     typer.Option(
         "-m",
         "--mode",
-        help="Zenoh session mode: peer (default) or client.",
+        metavar="MODE",
+        help="Zenoh session mode: peer (default), client or router.",
         rich_help_panel=_ZENOH,
     ),
 ]
@@ -72,7 +76,9 @@ NoScouting = Annotated[
 ]
 Root = Annotated[
     str,
-    typer.Option("--root", help="Key root of the fleet's keys.", rich_help_panel=_ZENOH),
+    typer.Option(
+        "--root", metavar="ROOT", help="Key root of the fleet's keys.", rich_help_panel=_ZENOH
+    ),
 ]
 
 
@@ -92,7 +98,8 @@ def session_options(
         msg = f"--mode must be peer, client or router, not {mode!r}"
         raise UsageError(msg)
     if config is not None and not config.is_file():
-        msg = f"Zenoh configuration file {config} does not exist"
+        what = "is not a file" if config.exists() else "does not exist"
+        msg = f"Zenoh configuration file {config} {what}"
         raise UsageError(msg)
     return SessionOptions(
         mode=mode,
@@ -113,6 +120,36 @@ def checked_root(root: str) -> str:
         return check_root(root)
     except FormatError as err:
         raise UsageError(str(err)) from None
+
+
+def checked_seconds(value: float, option: str, *, zero: bool = True) -> float:
+    """Validate a duration option: a finite number of seconds, not negative.
+
+    Args:
+        value: what was given.
+        option: the option's name, for the message.
+        zero: whether 0 is allowed.
+
+    Raises:
+        UsageError: NaN, infinite, negative, or 0 where it is not allowed.
+    """
+    if not math.isfinite(value) or value < 0 or (value == 0 and not zero):
+        least = "0 or more" if zero else "more than 0"
+        msg = f"{option} must be a number of seconds, {least}, not {value:g}"
+        raise UsageError(msg)
+    return value
+
+
+def checked_vehicle(name: str, option: str) -> str:
+    """Validate a vehicle name given on the command line.
+
+    Raises:
+        UsageError: the name is empty or blank.
+    """
+    if not name.strip():
+        msg = f"{option} needs a vehicle name, not {name!r}"
+        raise UsageError(msg)
+    return name
 
 
 DEFAULT = DEFAULT_ROOT

@@ -19,11 +19,16 @@ from fleetlog.cli.options import (
     NoScouting,
     Root,
     checked_root,
+    checked_seconds,
+    checked_vehicle,
     session_options,
 )
 from fleetlog.errors import QueryError, UsageError
 
 __all__ = ["parse_assignment", "poke"]
+
+#: how much of a value the confirmation line shows
+_SHOWN = 80
 
 
 def parse_assignment(text: str) -> tuple[str, float | str]:
@@ -60,21 +65,29 @@ def parse_assignment(text: str) -> tuple[str, float | str]:
 @app.command()
 def poke(
     assignments: Annotated[
-        list[str], typer.Argument(metavar="VAR=VALUE | VAR:=STRING", help="Variables to publish.")
+        list[str],
+        typer.Argument(
+            metavar="VAR=VALUE|VAR:=STRING", help="Variables to publish.", show_default=False
+        ),
     ],
     vehicle: Annotated[
         str | None,
         typer.Option(
-            "--vehicle", "-v", help="Vehicle to publish to [default: the one reachable recorder's]."
+            "--vehicle",
+            "-v",
+            metavar="NAME",
+            help="Vehicle to publish to [default: the one reachable recorder's].",
         ),
     ] = None,
     source: Annotated[
-        str, typer.Option("--source", help="Source process name to publish as.")
+        str, typer.Option("--source", metavar="NAME", help="Source process name to publish as.")
     ] = "uPokeDB",
     wait: Annotated[
         float,
         typer.Option(
-            "--wait", help="Seconds to wait for a subscriber and for the recorder's confirmation."
+            "--wait",
+            metavar="SECONDS",
+            help="Seconds to wait for a subscriber and for the recorder's confirmation.",
         ),
     ] = 3.0,
     root: Root = "fleet",
@@ -90,6 +103,9 @@ def poke(
     VAR:=STRING always publishes a string. Exits non-zero if nobody subscribes.
     """
     parsed = [parse_assignment(a) for a in assignments]
+    checked_seconds(wait, "--wait")
+    if vehicle is not None:
+        checked_vehicle(vehicle, "--vehicle")
     key_root = checked_root(root)
     zopts = session_options(mode, connect, listen, config, no_multicast_scouting)
     with Vehicle(vehicle, source=source, options=zopts, root=key_root) as v:
@@ -99,7 +115,10 @@ def poke(
                 raise QueryError(msg)
             v.publish(name, value)
             kind = "double" if isinstance(value, float) else "string"
-            print(f"{name} = {value!r} ({kind}) -> vehicle {v.vehicle}", file=sys.stderr)
+            shown = repr(value)
+            if len(shown) > _SHOWN:
+                shown = f"{shown[: _SHOWN - 5]}...{shown[-1]} ({len(str(value))} characters)"
+            print(f"{name} = {shown} ({kind}) -> vehicle {v.vehicle}", file=sys.stderr)
         if not v.confirm(timeout=wait):
             # No recorder answered; give plain subscribers a moment before the session closes.
             time.sleep(0.3)

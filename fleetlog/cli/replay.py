@@ -21,6 +21,8 @@ from fleetlog.cli.options import (
     NoScouting,
     Root,
     checked_root,
+    checked_seconds,
+    checked_vehicle,
     session_options,
 )
 from fleetlog.cli.replay_terminal import Keyboard, ProgressLine
@@ -74,8 +76,9 @@ def replay(
     inputs: Annotated[
         list[str],
         typer.Argument(
-            metavar="INPUT...",
-            help="Alogs (.alog, .alog.gz, .alog.zst) or session directories.",
+            metavar="INPUT",
+            help="Alogs (.alog, .alog.gz, .alog.zst), session directories, or V:latest /"
+            " V:SESSION.",
             show_default=False,
         ),
     ],
@@ -83,6 +86,7 @@ def replay(
         float,
         typer.Option(
             "--rate",
+            metavar="RATE",
             help=f"Playback rate, {MIN_RATE:g} ... {MAX_RATE:g}.",
             rich_help_panel=_PANEL,
         ),
@@ -174,7 +178,12 @@ def replay(
     ] = False,
     seek_step: Annotated[
         float,
-        typer.Option("--seek-step", help="Seconds an arrow key seeks.", rich_help_panel=_PANEL),
+        typer.Option(
+            "--seek-step",
+            metavar="SECONDS",
+            help="Seconds an arrow key seeks.",
+            rich_help_panel=_PANEL,
+        ),
     ] = 5.0,
     keep_duplicates: Annotated[
         bool,
@@ -244,9 +253,10 @@ def replay(
     """
     key_root = checked_root(root)
     zopts = session_options(mode, connect, listen, config, no_multicast_scouting)
-    if wait < 0 or seek_step <= 0:
-        msg = "--wait must be 0 or more and --seek-step more than 0 seconds"
-        raise UsageError(msg)
+    checked_seconds(wait, "--wait")
+    checked_seconds(seek_step, "--seek-step", zero=False)
+    for name in as_vehicle or ():
+        checked_vehicle(name, "--as")
     when_from = parse_when(start, "--from") if start is not None else None
     when_to = parse_when(stop, "--to") if stop is not None else None
     filters = FilterSpec(

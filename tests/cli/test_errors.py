@@ -44,6 +44,52 @@ def procs() -> Iterator[list[Proc]]:
         proc.close()
 
 
+# -- numbers that are not durations ---------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("args", "needles"),
+    [
+        (["poke", "X=1", "--wait", "-1"], ["--wait", "0 or more", "-1"]),
+        (["poke", "X=1", "--wait", "nan"], ["--wait", "nan"]),
+        (["sessions", "alpha", "--timeout", "-1"], ["--timeout", "more than 0", "-1"]),
+        (["sessions", "alpha", "--timeout", "0"], ["--timeout", "more than 0"]),
+        (["fetch", "alpha", "--rate", "nan"], ["--rate", "positive", "nan"]),
+        (["fetch", "alpha", "--rate", "inf"], ["--rate", "inf"]),
+        (["fetch", "alpha", "--retry-for", "-5"], ["--retry-for", "-5"]),
+        (["replay", "x.alog", "--wait", "nan"], ["--wait", "nan"]),
+        (["replay", "x.alog", "--wait", "inf"], ["--wait", "inf"]),
+        (["replay", "x.alog", "--seek-step", "nan"], ["--seek-step", "nan"]),
+    ],
+)
+def test_a_duration_must_be_a_finite_number_of_seconds(
+    args: list[str], needles: list[str], tmp_path: Path, cli_env: dict[str, str]
+) -> None:
+    # Before: a negative --timeout or --wait reached zenoh ("ValueError: negative timeout",
+    # a traceback, after poke had already published); NaN passed every check.
+    result = run_cli(*args, *ISOLATED, cwd=tmp_path, env=cli_env)
+    one_error(result, *needles)
+
+
+# -- vehicle names ---------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["poke", "X=1", "--vehicle", ""],
+        ["replay", "x.alog", "--as", ""],
+    ],
+)
+def test_an_empty_vehicle_name_is_refused(
+    args: list[str], tmp_path: Path, cli_env: dict[str, str]
+) -> None:
+    # Before: record and serve silently used the host name, poke and replay the key %00.
+    result = run_cli(*args, *ISOLATED, cwd=tmp_path, env=cli_env)
+    option = "--as" if "--as" in args else "--vehicle"
+    one_error(result, f"{option} needs a vehicle name")
+
+
 # -- mission files and Zenoh configuration files ----------------------------------------------
 
 
@@ -64,6 +110,11 @@ def test_a_bad_zenoh_config_file_is_named_with_where(
     config.write_text(text)
     result = run_cli("fleet", "-c", str(config), *ISOLATED, env=cli_env)
     one_error(result, f"Zenoh configuration file {config} is not usable: {needle}")
+
+
+def test_a_directory_as_zenoh_config_is_not_a_file(tmp_path: Path, cli_env: dict[str, str]) -> None:
+    result = run_cli("fleet", "-c", str(tmp_path), *ISOLATED, env=cli_env)
+    one_error(result, f"Zenoh configuration file {tmp_path} is not a file")
 
 
 # -- Ctrl-C while the commands load ------------------------------------------------------------
