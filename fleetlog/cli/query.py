@@ -11,7 +11,7 @@ from typing import Annotated
 import typer
 
 from fleetlog.cli.app import app
-from fleetlog.cli.options import Config, Connect, Listen, Mode, NoScouting, Root
+from fleetlog.cli.options import Config, Connect, Listen, Mode, NoScouting, Root, checked_seconds
 from fleetlog.cli.shore import open_client
 from fleetlog.errors import FormatError, QueryError, UsageError
 from fleetlog.moos.alog import Variant, format_entry
@@ -77,22 +77,31 @@ def alog_line(header: GrepHeader, record: GrepRecord) -> str:
 
 @app.command()
 def query(
-    vehicle: Annotated[str, typer.Argument(help="The vehicle (its MOOS community).")],
+    vehicle: Annotated[
+        str,
+        typer.Argument(
+            metavar="VEHICLE", help="The vehicle (its MOOS community).", show_default=False
+        ),
+    ],
     variables: Annotated[
         list[str] | None,
         typer.Argument(
-            metavar="[VAR]...",
+            metavar="VAR",
+            show_default=False,
             help="Variables to keep (MOOS globs: NAV_*, DB_?IME) [default: all].",
         ),
     ] = None,
     session: Annotated[
         str | None,
-        typer.Option("--session", "-s", help="The session [default: the latest]."),
+        typer.Option(
+            "--session", "-s", metavar="SESSION", help="The session [default: the latest]."
+        ),
     ] = None,
     source: Annotated[
         list[str] | None,
         typer.Option(
             "--source",
+            metavar="GLOB",
             help="Sources to keep (MOOS globs, on the source or its process name; repeatable).",
         ),
     ] = None,
@@ -108,13 +117,17 @@ def query(
         str | None, typer.Option("--to", metavar="TIME", help="End, as --from (inclusive).")
     ] = None,
     limit: Annotated[
-        int, typer.Option("--limit", help=f"At most this many entries (up to {MAX_GREP_LIMIT}).")
+        int,
+        typer.Option(
+            "--limit", metavar="N", help=f"At most this many entries (up to {MAX_GREP_LIMIT})."
+        ),
     ] = DEFAULT_GREP_LIMIT,
     fmt: Annotated[
-        str, typer.Option("--format", help="alog, csv or json (one per line).")
+        str, typer.Option("--format", metavar="FORMAT", help="alog, csv or json (one per line).")
     ] = "alog",
     timeout: Annotated[
-        float, typer.Option("--timeout", help="Seconds the whole answer may take.")
+        float,
+        typer.Option("--timeout", metavar="SECONDS", help="Seconds the whole answer may take."),
     ] = 300.0,
     root: Root = "fleet",
     mode: Mode = None,
@@ -134,13 +147,18 @@ def query(
     if not 1 <= limit <= MAX_GREP_LIMIT:
         msg = f"--limit must be between 1 and {MAX_GREP_LIMIT}, not {limit}"
         raise UsageError(msg)
-    request = GrepRequest(
-        tuple(variables or ()),
-        tuple(source or ()),
-        parse_time(start, "--from") if start else None,
-        parse_time(end, "--to") if end else None,
-        limit,
-    )
+    checked_seconds(timeout, "--timeout", zero=False)
+    first = parse_time(start, "--from") if start else None
+    last = parse_time(end, "--to") if end else None
+    if (
+        first is not None
+        and last is not None
+        and first.absolute == last.absolute
+        and first.value > last.value
+    ):
+        msg = f"--from {start} is after --to {end}: nothing can match"
+        raise UsageError(msg)
+    request = GrepRequest(tuple(variables or ()), tuple(source or ()), first, last, limit)
     try:
         if session is not None:
             check_component(session, "session")
@@ -160,8 +178,23 @@ def query(
         stream = client.grep(vehicle, session, request)
         _print(stream, fmt)
         end_record = stream.end
-    if end_record is not None and end_record.truncated:
+    if end_record is None:
+        return
+    if end_record.truncated:
         print(f"fleetlog: warning: stopped after {limit} entries (--limit)", file=sys.stderr)
+    if end_record.skipped:
+        # Otherwise a log the vehicle cannot read looks like one where nothing matched.
+        print(
+            f"fleetlog: warning: {end_record.skipped} line(s) of {session}'s alog are not alog"
+            " entries and were skipped",
+            file=sys.stderr,
+        )
+    if end_record.cut:
+        print(
+            f"fleetlog: warning: {session}'s alog ends inside an entry (still being written,"
+            " or cut short); that entry is left out",
+            file=sys.stderr,
+        )
 
 
 def _print(stream: GrepStream, fmt: str) -> None:

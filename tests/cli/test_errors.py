@@ -15,6 +15,8 @@ import pytest
 from helpers import free_port, run_cli
 from replay_support import Proc
 
+from fleetlog.moos.alog import format_banner, format_entry
+
 ISOLATED = ["--no-multicast-scouting"]
 
 
@@ -54,6 +56,8 @@ def procs() -> Iterator[list[Proc]]:
         (["poke", "X=1", "--wait", "nan"], ["--wait", "nan"]),
         (["sessions", "alpha", "--timeout", "-1"], ["--timeout", "more than 0", "-1"]),
         (["sessions", "alpha", "--timeout", "0"], ["--timeout", "more than 0"]),
+        (["query", "alpha", "--timeout", "nan"], ["--timeout", "nan"]),
+        (["query", "alpha", "--timeout", "-5"], ["--timeout", "-5"]),
         (["fetch", "alpha", "--rate", "nan"], ["--rate", "positive", "nan"]),
         (["fetch", "alpha", "--rate", "inf"], ["--rate", "inf"]),
         (["fetch", "alpha", "--retry-for", "-5"], ["--retry-for", "-5"]),
@@ -69,6 +73,12 @@ def test_a_duration_must_be_a_finite_number_of_seconds(
     # a traceback, after poke had already published); NaN passed every check.
     result = run_cli(*args, *ISOLATED, cwd=tmp_path, env=cli_env)
     one_error(result, *needles)
+
+
+def test_from_after_to_names_the_options(cli_env: dict[str, str]) -> None:
+    # Before: "parameter 'from' (5.0) is after 'to' (1.0)", the protocol's names.
+    result = run_cli("query", "alpha", "--from", "5", "--to", "1", *ISOLATED, env=cli_env)
+    one_error(result, "--from 5 is after --to 1")
 
 
 # -- vehicle names ---------------------------------------------------------------------------
@@ -129,3 +139,35 @@ def test_the_entry_point_loads_nothing_before_its_ctrl_c_guard() -> None:
     )
     assert result.returncode == 0, result.stderr
     assert result.stdout.strip() == "[]"
+
+
+# -- what a user must be told ------------------------------------------------------------------
+
+
+def test_query_says_when_lines_were_skipped_or_cut(
+    tmp_path: Path, cli_env: dict[str, str], procs: list[Proc]
+) -> None:
+    # Before: an alog the vehicle could not read printed its banner and nothing else, exit 0,
+    # exactly like a query that matched nothing.
+    root = "LOG_V_1_1_2027_____00_00_00"
+    session = tmp_path / "logs" / root
+    session.mkdir(parents=True)
+    banner = format_banner(f"./{root}/{root}.alog", 1_800_000_000.0, "Thu Jan  1 00:00:00 1970")
+    good = format_entry(1.0, "A", "p", "1.00000     ")
+    cut = format_entry(2.0, "B", "p", "two ")[:-4]  # no terminator, no newline
+    (session / f"{root}.alog").write_text(banner + "garbage here\nmore\n" + good + cut)
+    endpoint = loopback()
+    server = Proc(
+        ["serve", str(tmp_path / "logs"), "--vehicle", "v", "-l", endpoint, *ISOLATED],
+        cwd=tmp_path,
+        env=cli_env,
+    )
+    procs.append(server)
+    server.wait_for("serving")
+    result = run_cli("query", "v", "-e", endpoint, *ISOLATED, env=cli_env)
+    assert result.returncode == 0, result.stderr
+    assert "Traceback" not in result.stderr
+    assert result.stdout.endswith(good)
+    assert f"warning: 2 line(s) of {root}'s alog are not alog entries" in result.stderr
+    assert f"warning: {root}'s alog ends inside an entry" in result.stderr
+    assert server.stop() == 0
