@@ -21,6 +21,7 @@ from fleetlog.cli.options import (
     NoScouting,
     Root,
     checked_root,
+    checked_vehicle,
     session_options,
 )
 from fleetlog.errors import UsageError
@@ -53,7 +54,18 @@ def load_config(mission: Path | None, app_name: str) -> LoggerConfig:
     except OSError as err:
         msg = f"cannot read mission file {mission}: {err.strerror}"
         raise UsageError(msg) from None
-    return parse_mission(text, str(mission), env=os.environ).logger_config(app_name)
+    if "\0" in text:
+        msg = f"mission file {mission} is binary (it holds NUL bytes), not a MOOS mission file"
+        raise UsageError(msg)
+    parsed = parse_mission(text, str(mission), env=os.environ)
+    if parsed.block(app_name) is None:
+        # pLogger then logs every variable (§6.4), which a misspelt --app-name or block hides.
+        print(
+            f"fleetlog: warning: {mission} has no 'ProcessConfig = {app_name}' block:"
+            " logging every variable with pLogger's defaults",
+            file=sys.stderr,
+        )
+    return parsed.logger_config(app_name)
 
 
 def _default_vehicle() -> str:
@@ -89,7 +101,10 @@ def record(
     mission: Annotated[
         Path | None,
         typer.Argument(
-            help="MOOS mission file with a 'ProcessConfig = pLogger' block.", show_default=False
+            metavar="MISSION",
+            help="MOOS mission file with a 'ProcessConfig = pLogger' block"
+            " [default: none, log every variable].",
+            show_default=False,
         ),
     ] = None,
     vehicle: Annotated[
@@ -97,17 +112,23 @@ def record(
         typer.Option(
             "--vehicle",
             "-v",
+            metavar="NAME",
             help="Vehicle to record [default: the mission's Community, else the host name].",
         ),
     ] = None,
     app_name: Annotated[
         str,
-        typer.Option("--app-name", help="The mission block to read, as pLogger's second argument."),
+        typer.Option(
+            "--app-name",
+            metavar="NAME",
+            help="The mission block to read, as pLogger's second argument.",
+        ),
     ] = "pLogger",
     copy_dir: Annotated[
         list[Path] | None,
         typer.Option(
             "--copy-dir",
+            metavar="DIR",
             help=(
                 "Directory COPY_FILE_REQUEST may read from (repeatable; the mission's "
                 "directory always may)."
@@ -136,10 +157,9 @@ def record(
     key_root = checked_root(root)
     zopts = session_options(mode, connect, listen, config, no_multicast_scouting)
     cfg = load_config(mission, app_name)
+    if vehicle is not None:
+        checked_vehicle(vehicle, "--vehicle")
     veh = vehicle or cfg.community or _default_vehicle()
-    if not veh:
-        msg = "the vehicle name must not be empty"
-        raise UsageError(msg)
     mission_path = mission.resolve() if mission is not None else None
     dirs: list[Path] = []
     if mission_path is not None:
@@ -167,7 +187,17 @@ def record(
     signal.signal(signal.SIGTERM, on_signal)
 
     def ready(recorder: Recorder) -> None:
-        where = recorder.session.directory if recorder.session else "?"
+        current = recorder.session
+        where = current.directory if current else "?"
+        if current is not None and current.fallback:
+            # pLogger announces its fallback; the MOOS_DEBUG post alone is easy to miss.
+            print(
+                f"fleetlog: warning: cannot create a session under {cfg.path}:"
+                f" logging to the fallback {where} instead",
+                file=sys.stderr,
+            )
+        for warning in current.warnings if current is not None else ():
+            print(f"fleetlog: warning: {warning}", file=sys.stderr)
         print(
             f"fleetlog: recording vehicle {veh!r} into {where} (Ctrl-C to stop)",
             file=sys.stderr,

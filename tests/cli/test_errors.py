@@ -87,6 +87,7 @@ def test_from_after_to_names_the_options(cli_env: dict[str, str]) -> None:
 @pytest.mark.parametrize(
     "args",
     [
+        ["record", "--vehicle", ""],
         ["poke", "X=1", "--vehicle", ""],
         ["replay", "x.alog", "--as", ""],
     ],
@@ -101,6 +102,14 @@ def test_an_empty_vehicle_name_is_refused(
 
 
 # -- mission files and Zenoh configuration files ----------------------------------------------
+
+
+def test_a_binary_mission_file_is_named_as_binary(tmp_path: Path, cli_env: dict[str, str]) -> None:
+    # Before: the parser read it as text and complained about a '${...}' full of escapes.
+    mission = tmp_path / "bin.moos"
+    mission.write_bytes(b"\x7fELF\x02\x01\x01\x00\x00${\xb7Q}\x00\xff" * 50)
+    result = run_cli("record", str(mission), *ISOLATED, env=cli_env)
+    one_error(result, f"mission file {mission} is binary")
 
 
 @pytest.mark.parametrize(
@@ -142,6 +151,29 @@ def test_the_entry_point_loads_nothing_before_its_ctrl_c_guard() -> None:
 
 
 # -- what a user must be told ------------------------------------------------------------------
+
+
+def test_record_says_when_it_falls_back_and_when_the_block_is_missing(
+    tmp_path: Path, cli_env: dict[str, str], procs: list[Proc]
+) -> None:
+    # Before: both were posted on MOOS_DEBUG only; the terminal said "recording into ./…" as
+    # if all were well, and a misspelt block silently logged every variable.
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    mission = tmp_path / "m.moos"
+    mission.write_text(f"ProcessConfig = pLoger\n{{\n}}\nGlobalLogPath = {blocker}/logs\n")
+    rec = Proc(
+        ["record", str(mission), "--vehicle", "v", "--no-serve", "-l", loopback(), *ISOLATED],
+        cwd=tmp_path,
+        env=cli_env,
+    )
+    procs.append(rec)
+    rec.wait_for("recording vehicle 'v'")
+    assert rec.stop() == 0
+    err = rec.stderr
+    assert "Traceback" not in err
+    assert f"warning: {mission} has no 'ProcessConfig = pLogger' block" in err
+    assert f"warning: cannot create a session under {blocker}/logs: logging to the fallback" in err
 
 
 def test_query_says_when_lines_were_skipped_or_cut(
