@@ -20,11 +20,12 @@ from fleetlog.cli.options import (
     NoScouting,
     Root,
     checked_root,
+    checked_vehicle,
     session_options,
 )
 from fleetlog.errors import UsageError
 from fleetlog.query.server import LogServer
-from fleetlog.storage.catalog import LogCatalog
+from fleetlog.storage.catalog import ALOG_SUFFIXES, LogCatalog
 from fleetlog.transport.session import open_session
 
 __all__ = ["serve"]
@@ -43,6 +44,7 @@ def serve(
         typer.Option(
             "--vehicle",
             "-v",
+            metavar="NAME",
             help="Vehicle to serve as [default: the community that wrote the latest session,"
             " else the host name].",
         ),
@@ -74,8 +76,11 @@ def serve(
         msg = f"log root {log_root} is not a directory"
         raise UsageError(msg)
     if hint is not None and not hint.is_file():
-        msg = f"hint file {hint} does not exist"
+        what = "is not a file" if hint.exists() else "does not exist"
+        msg = f"hint file {hint} {what}"
         raise UsageError(msg)
+    if vehicle is not None:
+        checked_vehicle(vehicle, "--vehicle")
     catalog = LogCatalog(log_root, vehicle="", hint=hint)
     name = vehicle or catalog.guess_vehicle() or socket.gethostname().split(".")[0] or "vehicle"
     catalog.vehicle = name
@@ -91,6 +96,17 @@ def serve(
         with LogServer(session, catalog, root=key_root, announce=True):
             sessions = catalog.session_names()
             latest = catalog.latest()
+            if not sessions:
+                # A session directory given as LOGROOT is the usual slip: say what to serve.
+                inner = any(p.name.endswith(ALOG_SUFFIXES) for p in log_root.iterdir())
+                advice = (
+                    f"; it is a session itself: serve {log_root.resolve().parent}" if inner else ""
+                )
+                print(
+                    f"fleetlog: warning: {log_root} holds no session directory (a directory"
+                    f" with an .alog, .alog.gz or .alog.zst){advice}",
+                    file=sys.stderr,
+                )
             print(
                 f"fleetlog: serving {log_root} as vehicle {name!r}: {len(sessions)} session(s),"
                 f" latest {latest.session or '-'} ({latest.how}) (Ctrl-C to stop)",

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 from helpers import free_port, run_cli
-from replay_support import Proc
+from replay_support import Line, Proc, write_session
 
 from fleetlog.moos.alog import format_banner, format_entry
 
@@ -88,6 +88,7 @@ def test_from_after_to_names_the_options(cli_env: dict[str, str]) -> None:
     "args",
     [
         ["record", "--vehicle", ""],
+        ["serve", ".", "--vehicle", " "],
         ["poke", "X=1", "--vehicle", ""],
         ["replay", "x.alog", "--as", ""],
     ],
@@ -136,6 +137,11 @@ def test_a_directory_as_zenoh_config_is_not_a_file(tmp_path: Path, cli_env: dict
     one_error(result, f"Zenoh configuration file {tmp_path} is not a file")
 
 
+def test_a_directory_as_hint_file_is_not_a_file(tmp_path: Path, cli_env: dict[str, str]) -> None:
+    result = run_cli("serve", str(tmp_path), "--hint", str(tmp_path), *ISOLATED, env=cli_env)
+    one_error(result, f"hint file {tmp_path} is not a file")
+
+
 # -- Ctrl-C while the commands load ------------------------------------------------------------
 
 
@@ -174,6 +180,21 @@ def test_record_says_when_it_falls_back_and_when_the_block_is_missing(
     assert "Traceback" not in err
     assert f"warning: {mission} has no 'ProcessConfig = pLogger' block" in err
     assert f"warning: cannot create a session under {blocker}/logs: logging to the fallback" in err
+
+
+def test_serving_a_session_directory_says_to_serve_its_parent(
+    tmp_path: Path, cli_env: dict[str, str], procs: list[Proc]
+) -> None:
+    session = write_session(tmp_path, [Line(1.0, "A", "p", 1.0)])
+    server = Proc(
+        ["serve", str(session), "--vehicle", "v", "-l", loopback(), *ISOLATED],
+        cwd=tmp_path,
+        env=cli_env,
+    )
+    procs.append(server)
+    line = server.wait_for("holds no session directory")
+    assert f"it is a session itself: serve {tmp_path.resolve()}" in line
+    assert server.stop() == 0
 
 
 def test_query_says_when_lines_were_skipped_or_cut(
