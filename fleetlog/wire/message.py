@@ -135,7 +135,9 @@ def encode_value(value: float | str | bytes) -> tuple[Kind, bytes]:
     if isinstance(value, bytes | bytearray | memoryview):
         return Kind.BINARY, bytes(value)
     if isinstance(value, str):
-        return Kind.STRING, value.encode("utf-8")
+        # surrogateescape: a value read from an alog with non-UTF-8 bytes goes out as those
+        # bytes (what the MOOS process published), not as an exception.
+        return Kind.STRING, value.encode("utf-8", "surrogateescape")
     if isinstance(value, bool):
         msg = "a MOOS value is a float, a str or bytes, not a bool"
         raise TypeError(msg)
@@ -166,7 +168,9 @@ def _leb128(n: int) -> bytes:
 
 
 def _put_str(out: bytearray, text: str) -> None:
-    raw = text.encode("utf-8")
+    # The attachment's strings must be UTF-8 for every reader: a byte that is not (a source
+    # read from a Latin-1 alog, carried as a surrogate escape) is sent as "?".
+    raw = text.encode("utf-8", "replace")
     out += _leb128(len(raw))
     out += raw
 

@@ -224,3 +224,29 @@ def test_query_says_when_lines_were_skipped_or_cut(
     assert f"warning: 2 line(s) of {root}'s alog are not alog entries" in result.stderr
     assert f"warning: {root}'s alog ends inside an entry" in result.stderr
     assert server.stop() == 0
+
+
+def test_replaying_an_alog_with_non_utf8_bytes_does_not_crash(
+    tmp_path: Path, cli_env: dict[str, str]
+) -> None:
+    # Before: UnicodeEncodeError in the attachment's encoder, a traceback, for a Latin-1
+    # source, community or value (a real pLogger writes MOOS's bytes as they are).
+    root = "LOG_V_1_1_2027_____00_00_00"
+    session = tmp_path / root
+    session.mkdir()
+    banner = format_banner(f"./{root}/{root}.alog", 1_800_000_000.0, "Thu Jan  1 00:00:00 1970")
+    lines = [
+        format_entry(0.5, "X", "p\udcffNav", "hello "),
+        format_entry(0.6, "Y", "pNav@c\udcfc", "x "),
+        format_entry(0.7, "Z", "pNav", "h\udcfdllo "),
+    ]
+    data = (banner + "".join(lines)).encode("utf-8", "surrogateescape")
+    (session / f"{root}.alog").write_bytes(data)
+    result = run_cli(
+        "replay", str(session), "--as", "v", "--fast", "--wait", "0", "--no-keys",
+        "-l", loopback(), *ISOLATED,
+        env=cli_env,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert "Traceback" not in result.stderr
+    assert "published 3 entries" in result.stderr
