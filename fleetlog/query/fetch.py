@@ -28,6 +28,7 @@ from collections import deque
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TypeVar
 
 from fleetlog.errors import QueryError, StorageError
 from fleetlog.query.client import FleetClient, PendingRange, TransientQueryError
@@ -100,6 +101,9 @@ class _RateLimit:
         self._next = max(now, self._next) + amount / self.rate
 
 
+_T = TypeVar("_T")
+
+
 @dataclass
 class _Context:
     client: FleetClient
@@ -112,6 +116,21 @@ class _Context:
     limit: _RateLimit
     cancel: threading.Event
     received: int = 0
+
+
+def _riding_out(ctx: _Context, call: Callable[[], _T]) -> _T:
+    """Call ``call``, retrying for ``retry_for`` seconds while the vehicle does not answer."""
+    deadline = time.monotonic() + ctx.retry_for
+    delay = 0.25
+    while True:
+        try:
+            return call()
+        except TransientQueryError as err:
+            if time.monotonic() + delay > deadline or ctx.cancel.is_set():
+                msg = f"{err} (the same command resumes the download of {ctx.session})"
+                raise QueryError(msg) from None
+            time.sleep(delay)
+            delay = min(2.0, delay * 2)
 
 
 class _Restart(Exception):
@@ -202,10 +221,13 @@ class _Transfer:
         """Fetch until the ``.part`` holds ``target`` bytes (or what the file has, if less)."""
         if self.status:
             return
-        deadline = time.monotonic() + self.ctx.retry_for
+        # retry_for counts from when the vehicle stopped answering, not from the start of the
+        # file: a transfer longer than retry_for must still ride out a dropped link.
+        deadline: float | None = None
         delay = 0.25
         restarts = 0
         while True:
+            had = self.part.size
             try:
                 self._pull(target)
                 return
@@ -216,6 +238,8 @@ class _Transfer:
                     raise QueryError(msg) from None
                 self.part.reset()
             except TransientQueryError as err:
+                if deadline is None or self.part.size > had:
+                    deadline, delay = time.monotonic() + self.ctx.retry_for, 0.25
                 if time.monotonic() + delay > deadline or self.ctx.cancel.is_set():
                     msg = (
                         f"{err} (at byte {self.part.size} of {self.ctx.session}/{self.name};"
@@ -383,7 +407,8 @@ def fetch_session(
     transfers: dict[str, _Transfer] = {}
     try:
         while True:
-            info = client.session(vehicle, session, brief=True)
+            # Following: a vehicle that stops answering between two looks is retried too.
+            info = _riding_out(ctx, lambda: client.session(vehicle, session, brief=True))
             ctx.progress.total(vehicle, info.size)
             for remote in info.files:
                 transfer = transfers.get(remote.name)

@@ -6,8 +6,10 @@ place one thing found wrong by trying the commands by hand.
 
 from __future__ import annotations
 
+import os
 import subprocess
 import sys
+import time
 from collections.abc import Iterator
 from pathlib import Path
 
@@ -250,3 +252,38 @@ def test_replaying_an_alog_with_non_utf8_bytes_does_not_crash(
     assert result.returncode == 0, result.stderr
     assert "Traceback" not in result.stderr
     assert "published 3 entries" in result.stderr
+
+
+def test_fetch_rides_out_a_dropped_link_after_a_transfer_longer_than_retry_for(
+    tmp_path: Path, cli_env: dict[str, str], procs: list[Proc]
+) -> None:
+    # Before: --retry-for counted from the start of the file, so a download that had run
+    # longer than it gave up at the first unanswered range ("vehicle is not up").
+    root = "LOG_V_1_1_2027_____00_00_00"
+    session = tmp_path / "logs" / root
+    session.mkdir(parents=True)
+    banner = format_banner(f"./{root}/{root}.alog", 1_800_000_000.0, "Thu Jan  1 00:00:00 1970")
+    entry = format_entry(1.0, "A", "p", "x" * 200 + " ")
+    alog = session / f"{root}.alog"
+    alog.write_text(banner + entry * (24_000_000 // len(entry)))
+    os.utime(alog, (1_700_000_000, 1_700_000_000))  # complete: unchanged for long
+    endpoint = loopback()
+    serve = ["serve", str(tmp_path / "logs"), "--vehicle", "v", "-l", endpoint, *ISOLATED]
+    server = Proc(serve, cwd=tmp_path, env=cli_env)
+    procs.append(server)
+    server.wait_for("serving")
+    out = str(tmp_path / "out")
+    slow = ["--rate", "2", "--retry-for", "5"]
+    fetch = Proc(
+        ["fetch", "v", "--latest", "-o", out, *slow, "-e", endpoint, *ISOLATED], tmp_path, cli_env
+    )
+    procs.append(fetch)
+    time.sleep(7.0)  # beyond --retry-for, well before the 12 s the transfer takes
+    assert fetch.proc.poll() is None, fetch.stderr
+    assert server.stop() == 0
+    again = Proc(serve, cwd=tmp_path, env=cli_env)
+    procs.append(again)
+    again.wait_for("serving")
+    assert fetch.wait(60) == 0, fetch.stderr
+    assert (tmp_path / "out" / root / f"{root}.alog").read_bytes() == alog.read_bytes()
+    assert again.stop() == 0
