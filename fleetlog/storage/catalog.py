@@ -270,6 +270,9 @@ class LogCatalog:
     def sessions(self, *, brief: bool = False) -> list[SessionInfo]:
         """Describe every session, oldest first; sessions that vanish meanwhile are left out.
 
+        A session whose alog cannot be read (corrupt compression) is listed as ``brief``
+        lists it: left out, it would vanish from the listing while ``latest`` names it.
+
         Raises:
             StorageError: the log root cannot be listed.
         """
@@ -278,7 +281,10 @@ class LogCatalog:
             try:
                 out.append(self.session(name, brief=brief))
             except StorageError:
-                continue
+                try:
+                    out.append(self.session(name, brief=True))
+                except StorageError:
+                    continue  # it vanished meanwhile
         return out
 
     def _details_of(self, session: str, alog: str, st: os.stat_result) -> _Details:

@@ -6,6 +6,7 @@ place one thing found wrong by trying the commands by hand.
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -287,3 +288,28 @@ def test_fetch_rides_out_a_dropped_link_after_a_transfer_longer_than_retry_for(
     assert fetch.wait(60) == 0, fetch.stderr
     assert (tmp_path / "out" / root / f"{root}.alog").read_bytes() == alog.read_bytes()
     assert again.stop() == 0
+
+
+def test_sessions_lists_a_session_whose_alog_is_corrupt(
+    tmp_path: Path, cli_env: dict[str, str], procs: list[Proc]
+) -> None:
+    # Before: a session with a corrupt .alog.gz vanished from `sessions`, while `fleet` named
+    # it as the vehicle's latest session.
+    logs = tmp_path / "logs"
+    write_session(logs, [Line(1.0, "A", "p", 1.0)], root="LOG_V_1_1_2027_____00_00_00")
+    bad = logs / "LOG_V_2_1_2027_____00_00_00"
+    bad.mkdir()
+    (bad / f"{bad.name}.alog.gz").write_bytes(b"\x1f\x8b\x08\x00 not really gzip" * 20)
+    endpoint = loopback()
+    server = Proc(
+        ["serve", str(logs), "--vehicle", "v", "-l", endpoint, *ISOLATED], tmp_path, cli_env
+    )
+    procs.append(server)
+    server.wait_for("serving")
+    result = run_cli("sessions", "v", "--json", "-e", endpoint, *ISOLATED, env=cli_env)
+    assert result.returncode == 0, result.stderr
+    listed = [json.loads(line) for line in result.stdout.splitlines()]
+    assert [s["name"] for s in listed] == ["LOG_V_1_1_2027_____00_00_00", bad.name]
+    assert listed[1]["latest"] is True
+    assert listed[1]["files"][0]["name"] == f"{bad.name}.alog.gz"
+    assert server.stop() == 0
