@@ -21,7 +21,16 @@ from rich.progress import (
 )
 
 from fleetlog.cli.app import app
-from fleetlog.cli.options import Config, Connect, Listen, Mode, NoScouting, Root, checked_seconds
+from fleetlog.cli.options import (
+    Config,
+    Connect,
+    Listen,
+    Mode,
+    NoScouting,
+    Root,
+    checked_seconds,
+    checked_vehicle,
+)
 from fleetlog.cli.shore import open_client
 from fleetlog.cli.tables import err_console, human_size
 from fleetlog.errors import FleetlogError, FormatError, QueryError, UsageError
@@ -185,6 +194,8 @@ def fetch(
         msg = f"--rate must be a positive number of MB/s, not {rate:g}"
         raise UsageError(msg)
     checked_seconds(retry_for, "--retry-for")
+    if vehicle is not None:
+        checked_vehicle(vehicle, "VEHICLE")
     try:
         if session is not None:
             check_component(session, "session")

@@ -11,7 +11,16 @@ from typing import Annotated
 import typer
 
 from fleetlog.cli.app import app
-from fleetlog.cli.options import Config, Connect, Listen, Mode, NoScouting, Root, checked_seconds
+from fleetlog.cli.options import (
+    Config,
+    Connect,
+    Listen,
+    Mode,
+    NoScouting,
+    Root,
+    checked_seconds,
+    checked_vehicle,
+)
 from fleetlog.cli.shore import open_client
 from fleetlog.errors import FormatError, QueryError, UsageError
 from fleetlog.moos.alog import Variant, format_entry
@@ -147,6 +156,7 @@ def query(
     if not 1 <= limit <= MAX_GREP_LIMIT:
         msg = f"--limit must be between 1 and {MAX_GREP_LIMIT}, not {limit}"
         raise UsageError(msg)
+    checked_vehicle(vehicle, "VEHICLE")
     checked_seconds(timeout, "--timeout", zero=False)
     first = parse_time(start, "--from") if start else None
     last = parse_time(end, "--to") if end else None

@@ -8,7 +8,16 @@ from typing import Annotated
 import typer
 
 from fleetlog.cli.app import app
-from fleetlog.cli.options import Config, Connect, Listen, Mode, NoScouting, Root, checked_seconds
+from fleetlog.cli.options import (
+    Config,
+    Connect,
+    Listen,
+    Mode,
+    NoScouting,
+    Root,
+    checked_seconds,
+    checked_vehicle,
+)
 from fleetlog.cli.shore import open_client
 from fleetlog.cli.tables import console, sessions_table
 
@@ -42,6 +51,7 @@ def sessions(
     no_multicast_scouting: NoScouting = False,
 ) -> None:
     """List a vehicle's log sessions, oldest first; the latest is marked with '*'."""
+    checked_vehicle(vehicle, "VEHICLE")
     checked_seconds(timeout, "--timeout", zero=False)
     with open_client(root, mode, connect, listen, config, no_multicast_scouting) as client:
         client.require(vehicle)

@@ -94,6 +94,9 @@ def test_from_after_to_names_the_options(cli_env: dict[str, str]) -> None:
         ["serve", ".", "--vehicle", " "],
         ["poke", "X=1", "--vehicle", ""],
         ["replay", "x.alog", "--as", ""],
+        ["sessions", ""],
+        ["query", " "],
+        ["fetch", "", "--latest"],
     ],
 )
 def test_an_empty_vehicle_name_is_refused(
@@ -101,7 +104,7 @@ def test_an_empty_vehicle_name_is_refused(
 ) -> None:
     # Before: record and serve silently used the host name, poke and replay the key %00.
     result = run_cli(*args, *ISOLATED, cwd=tmp_path, env=cli_env)
-    option = "--as" if "--as" in args else "--vehicle"
+    option = next((o for o in ("--as", "--vehicle") if o in args), "VEHICLE")
     one_error(result, f"{option} needs a vehicle name")
 
 
