@@ -30,6 +30,7 @@ from fleetlog.errors import UsageError
 from fleetlog.replayer.control import MAX_RATE, MIN_RATE
 from fleetlog.replayer.engine import Player, PlayOptions
 from fleetlog.replayer.filters import FilterSpec
+from fleetlog.replayer.report import State
 from fleetlog.replayer.schedule import DEFAULT_WINDOW
 from fleetlog.replayer.service import ReplayConfig, ReplayService
 from fleetlog.wire.keys import service_key
@@ -302,7 +303,8 @@ def replay(
         )
     )
     keys = not no_keys and sys.stdin.isatty()
-    _run(service, player, console, key_root, keys=keys, seek_step=seek_step)
+    window = start is not None or stop is not None
+    _run(service, player, console, key_root, keys=keys, seek_step=seek_step, window=window)
 
 
 def _run(
@@ -313,6 +315,7 @@ def _run(
     *,
     keys: bool,
     seek_step: float,
+    window: bool = False,
 ) -> None:
     vehicles = ", ".join(dict.fromkeys(player.vehicles))
     control = service_key(root, player.vehicles[0], "replay", "control")
@@ -347,6 +350,12 @@ def _run(
         summary = service.run(on_ready=ready)
     for line in summary.lines():
         console.print(f"fleetlog: {line}" if not line.startswith(" ") else line, markup=False)
+    if window and summary.state is State.FINISHED and not summary.published + summary.filtered:
+        # Else a --from past the end (or a --to before the start) looks like an empty log.
+        console.print(
+            "fleetlog: note: no entry lies between --from and --to; nothing was played",
+            markup=False,
+        )
     if service.unconfirmed and any(c.published for c in summary.vehicles.values()):
         names = ", ".join(service.unconfirmed)
         console.print(f"fleetlog: note: no recorder confirmed receipt for {names}", markup=False)

@@ -316,3 +316,19 @@ def test_sessions_lists_a_session_whose_alog_is_corrupt(
     assert listed[1]["latest"] is True
     assert listed[1]["files"][0]["name"] == f"{bad.name}.alog.gz"
     assert server.stop() == 0
+
+
+@pytest.mark.parametrize("window", [["--from", "100"], ["--to", "0.5"]])
+def test_replay_says_when_its_window_holds_no_entry(
+    window: list[str], tmp_path: Path, cli_env: dict[str, str]
+) -> None:
+    # Before: "finished: published 0 entries" and nothing else, like an empty log.
+    lines = [Line(1.0, "A", "p", 1.0), Line(2.0, "B", "p", 2.0)]
+    session = write_session(tmp_path, lines, vehicle=None)
+    result = run_cli(
+        "replay", str(session), "--as", "v", *window, "--fast", "--wait", "0", "--no-keys",
+        "-l", loopback(), *ISOLATED,
+        env=cli_env,
+    )  # fmt: skip
+    assert result.returncode == 0, result.stderr
+    assert "note: no entry lies between --from and --to; nothing was played" in result.stderr
