@@ -12,7 +12,8 @@ Example::
 
 Publishing uses Zenoh's BLOCK congestion control: a publisher slows down rather than lose
 samples a recorder is waiting for. ``drop=True`` selects DROP for control loops that must never
-stall; losses are then possible.
+stall; losses are then possible, and the recorder counts them (sample-miss detection,
+docs/wire.md).
 """
 
 from __future__ import annotations
@@ -53,7 +54,8 @@ class Vehicle:
         source: the source process name the recorder logs.
         options: how to open Zenoh (an embedded peer by default).
         root: the key root.
-        drop: DROP congestion control instead of BLOCK.
+        drop: DROP congestion control instead of BLOCK; the samples are numbered so that the
+            recorder counts what is dropped.
         session: an already open session to use (it is then not closed here).
     """
 

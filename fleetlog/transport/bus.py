@@ -1,7 +1,9 @@
 """MOOS messages over a Zenoh session: publish, subscribe, decode (docs/wire.md).
 
 Everything fleetlog publishes that someone may log uses BLOCK congestion control and reliable
-delivery: the default DROP lost most samples at full speed on a 2-core machine.
+delivery: the default DROP lost most samples at full speed on a 2-core machine. A publisher
+that must never stall uses DROP with zenoh-ext's sample-miss detection, and the recorder counts
+what it lost (:class:`MissCounter`).
 """
 
 from __future__ import annotations
@@ -13,6 +15,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import zenoh
+import zenoh.ext
 
 from fleetlog.errors import FormatError, TransportError
 from fleetlog.transport.session import translate_zerror
@@ -30,12 +33,19 @@ from fleetlog.wire.message import (
 )
 
 __all__ = [
+    "MISS_HEARTBEAT",
     "Incoming",
+    "MissCounter",
     "MoosPublisher",
     "SampleDecoder",
     "declare_fifo_subscriber",
+    "heartbeat_keys",
     "zenoh_time",
 ]
+
+#: seconds between a DROP publisher's heartbeats (its last sequence number): how soon a loss
+#: at the end of a burst, which no later sample reveals, can be counted
+MISS_HEARTBEAT = 1.0
 
 _ENCODING_OBJECTS: dict[Kind, zenoh.Encoding] = {k: zenoh.Encoding(v) for k, v in ENCODINGS.items()}
 # Comparing a sample's encoding with these costs a third of turning it into text.
@@ -206,6 +216,149 @@ def declare_fifo_subscriber(
         return session.declare_subscriber(key_expr, zenoh.handlers.FifoChannel(capacity))
 
 
+def heartbeat_keys(key_expr: str) -> str:
+    """The key expression of the sample-miss heartbeats of publishers on ``key_expr``.
+
+    zenoh-ext's AdvancedPublisher announces its last sequence number on
+    ``<key>/@adv/pub/<zid>/<eid>/_``; ``@adv`` is a verbatim chunk, so no subscription to the
+    variables themselves receives them.
+    """
+    return f"{key_expr}/@adv/pub/**"
+
+
+class _Source:
+    """One numbered publisher, as the miss counter follows it."""
+
+    __slots__ = ("beat", "expected", "key", "zid", "zid_text")
+
+    def __init__(self, zid: Any, key: str) -> None:
+        self.zid = zid
+        self.zid_text = str(zid)
+        #: the key of its first sample (a zenoh-ext publisher has one key)
+        self.key = key
+        #: the next sequence number expected; -1 before its first sample
+        self.expected = -1
+        #: a heartbeat not yet trusted: (when read, the last number sent)
+        self.beat: tuple[float, int] | None = None
+
+
+class MissCounter:
+    """Counts the samples that publishers with sample-miss detection lost on their way here.
+
+    zenoh-ext's AdvancedPublisher with ``sample_miss_detection`` (``MoosPublisher(drop=True)``
+    is one) numbers each publisher's samples 0, 1, 2, … in the sample's source info. A gap in
+    one publisher's numbers is samples that never arrived: DROP congestion control dropped them
+    on a congested link. Losses at the end of a burst show no gap until the publisher's next
+    sample; its periodic heartbeat (the last number it sent) reveals them sooner.
+
+    Plain samples (no source info) are not looked at, and no sample is ever held back or
+    filtered: this only counts. Counting starts at the first sample of each publisher that
+    arrives. Everything runs in the thread that drains the subscribers (no callback, no lock).
+
+    Args:
+        clock: a monotonic clock, seconds.
+        settle_delay: a heartbeat is trusted only this long after it was read, and only once
+            the subscribers were seen empty after that: a sample numbered before the heartbeat
+            may still be queued behind it.
+    """
+
+    def __init__(
+        self, clock: Callable[[], float] = time.monotonic, settle_delay: float = 0.5
+    ) -> None:
+        self._clock = clock
+        self._settle_delay = settle_delay
+        #: entity id → the publisher last seen with it (the fast path: a zid comparison)
+        self._latest: dict[int, _Source] = {}
+        #: (zid, entity id) → publisher; EntityGlobalId itself hashes by identity
+        self._sources: dict[tuple[Any, int], _Source] = {}
+        #: (zid text, entity id) → publisher, for heartbeats, whose key spells the id
+        self._by_text: dict[tuple[str, int], _Source] = {}
+        self._waiting: list[_Source] = []
+        self._found: dict[tuple[str, str], int] = {}
+
+    def seen(self, info: Any, sample: zenoh.Sample) -> None:
+        """Account for a received sample whose ``source_info`` is ``info`` (not None)."""
+        source_id = info.source_id
+        zid = source_id.zid
+        eid = source_id.eid
+        sn = info.source_sn
+        source = self._latest.get(eid)
+        if source is None or source.zid != zid:
+            source = self._source(zid, eid, sample)
+        expected = source.expected
+        if sn != expected and expected >= 0:
+            if sn < expected:
+                return  # late or repeated, not a loss
+            self._add(source, sn - expected)
+        source.expected = sn + 1
+
+    def _source(self, zid: Any, eid: int, sample: zenoh.Sample) -> _Source:
+        source = self._sources.get((zid, eid))
+        if source is None:
+            if len(self._sources) >= 65536:
+                # Bounded like the other per-key caches; counting restarts for each publisher.
+                self._sources.clear()
+                self._latest.clear()
+                self._by_text.clear()
+                self._waiting.clear()
+            source = _Source(zid, str(sample.key_expr))
+            self._sources[(zid, eid)] = source
+            self._by_text[(source.zid_text, eid)] = source
+        self._latest[eid] = source
+        return source
+
+    def _add(self, source: _Source, count: int) -> None:
+        name = (source.key, source.zid_text)
+        self._found[name] = self._found.get(name, 0) + count
+
+    def heartbeat(self, sample: zenoh.Sample) -> None:
+        """Note a heartbeat (a sample of :func:`heartbeat_keys`); malformed ones are ignored."""
+        key = str(sample.key_expr)
+        _, sep, rest = key.rpartition("/@adv/pub/")
+        parts = rest.split("/")
+        payload = sample.payload.to_bytes()
+        if not sep or len(parts) < 2 or len(payload) != 4 or not parts[1].isdigit():
+            return
+        source = self._by_text.get((parts[0], int(parts[1])))
+        if source is None or source.beat is not None:
+            return  # not a publisher seen here yet, or an older heartbeat still waits
+        source.beat = (self._clock(), int.from_bytes(payload, "little"))
+        self._waiting.append(source)
+
+    def settle(self, drained_at: float, min_age: float | None = None) -> None:
+        """Count the losses that heartbeats read before ``drained_at`` reveal.
+
+        Args:
+            drained_at: when (on the counter's clock) every subscriber was last seen empty.
+            min_age: trust heartbeats read at least this long ago (``settle_delay`` when None;
+                0 at shutdown).
+        """
+        if not self._waiting:
+            return
+        age = self._settle_delay if min_age is None else min_age
+        now = self._clock()
+        waiting: list[_Source] = []
+        for source in self._waiting:
+            assert source.beat is not None
+            read_at, last = source.beat
+            if read_at > drained_at or now - read_at < age:
+                waiting.append(source)
+                continue
+            source.beat = None
+            if source.expected >= 0 and last >= source.expected:
+                self._add(source, last - source.expected + 1)
+                source.expected = last + 1
+        self._waiting = waiting
+
+    def take(self) -> list[tuple[str, str, int]]:
+        """Return and forget the losses found so far: ``(key, publisher zid, count)``."""
+        if not self._found:
+            return []
+        found = [(key, zid, count) for (key, zid), count in self._found.items()]
+        self._found.clear()
+        return found
+
+
 class MoosPublisher:
     """Publishes MOOS messages of one vehicle (BLOCK congestion control, reliable).
 
@@ -214,8 +367,10 @@ class MoosPublisher:
         root: the key root (``fleet``).
         vehicle: the vehicle (MOOS community) the variables belong to.
         source: the default source process name.
-        drop: use DROP congestion control (for control loops that must never stall; losses
-            are then possible and uncounted by the publisher).
+        drop: use DROP congestion control, for control loops that must never stall. The
+            publisher then numbers its samples (zenoh-ext's sample-miss detection, with a
+            heartbeat every :data:`MISS_HEARTBEAT` seconds), so that a recorder counts what
+            was dropped (docs/wire.md).
     """
 
     def __init__(
@@ -233,23 +388,38 @@ class MoosPublisher:
         self.vehicle = vehicle
         self.source = source
         self._clock = clock
+        self._drop = drop
         self._congestion = zenoh.CongestionControl.DROP if drop else zenoh.CongestionControl.BLOCK
-        self._publishers: dict[tuple[str, Kind], zenoh.Publisher] = {}
+        self._publishers: dict[tuple[str, Kind], zenoh.Publisher | zenoh.ext.AdvancedPublisher] = {}
         self._keys: dict[tuple[str, str], str] = {}
 
-    def _publisher(self, key: str, kind: Kind) -> zenoh.Publisher:
+    def _publisher(self, key: str, kind: Kind) -> zenoh.Publisher | zenoh.ext.AdvancedPublisher:
         # A declared publisher per key is much cheaper per put than session.put.
         pub = self._publishers.get((key, kind))
         if pub is None:
             if len(self._publishers) >= 4096:
                 self.close()
             with translate_zerror(f"publisher on {key!r}"):
-                pub = self._session.declare_publisher(
-                    key,
-                    encoding=_ENCODING_OBJECTS[kind],
-                    congestion_control=self._congestion,
-                    reliability=zenoh.Reliability.RELIABLE,
-                )
+                if self._drop:
+                    # Numbered samples and a heartbeat: a recorder counts what DROP loses.
+                    # The heartbeat is periodic (DROP itself), never BLOCK.
+                    pub = zenoh.ext.declare_advanced_publisher(
+                        self._session,
+                        key,
+                        encoding=_ENCODING_OBJECTS[kind],
+                        congestion_control=self._congestion,
+                        reliability=zenoh.Reliability.RELIABLE,
+                        sample_miss_detection=zenoh.ext.MissDetectionConfig(
+                            heartbeat=MISS_HEARTBEAT, sporadic_heartbeat=None
+                        ),
+                    )
+                else:
+                    pub = self._session.declare_publisher(
+                        key,
+                        encoding=_ENCODING_OBJECTS[kind],
+                        congestion_control=self._congestion,
+                        reliability=zenoh.Reliability.RELIABLE,
+                    )
             self._publishers[(key, kind)] = pub
         return pub
 
@@ -279,7 +449,7 @@ class MoosPublisher:
         self._publishers.clear()
         for pub in publishers:
             with contextlib.suppress(zenoh.ZError):
-                pub.undeclare()
+                pub.undeclare()  # type: ignore[no-untyped-call]  # zenoh.ext's stub
 
     def publish(
         self,
