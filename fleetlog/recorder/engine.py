@@ -33,6 +33,8 @@ SKEW_TOLERANCE = 5.0
 MONITOR_INTERVAL = 10.0
 #: CMOOSApp's status period
 STATUS_INTERVAL = 2.0
+#: samples lost before reaching the recorder are reported on MOOS_DEBUG at most this often
+MISSED_REPORT_INTERVAL = 1.0
 _SYSTEM_VARS = ("MOOS_DEBUG", "MOOS_SYSTEM")
 
 Publish = Callable[[MoosMessage], None]
@@ -50,6 +52,9 @@ class RecorderStats:
     skewed: int = 0
     garbled: int = 0
     lost: int = 0
+    #: samples that publishers with sample-miss detection (DROP) sent but never arrived;
+    #: those of variables the recorder logs are also in ``lost``
+    missed: int = 0
     write_errors: int = 0
     refused_copies: int = 0
     sessions: int = 0
@@ -75,6 +80,7 @@ class _Var:
 class _Timers:
     monitor: float = 0.0
     status: float = 0.0
+    missed: float = -1e300
 
 
 @dataclass
@@ -156,6 +162,8 @@ class Recorder:
         self._in_fallback = False
         #: keys already reported as naming no variable
         self._unreadable: set[str] = set()
+        #: samples lost on the way per publisher (its Zenoh id), not yet on MOOS_DEBUG
+        self._missed: dict[str, int] = {}
 
     # ---------------------------------------------------------------------------------------
     # Sessions
@@ -383,6 +391,23 @@ class Recorder:
             self._unreadable.add(key)
             self.debug(f"sample on {key} names no MOOS variable: not logged")
 
+    def missed(self, name: str | None, source: str, count: int) -> None:
+        """Count samples of ``name`` that publisher ``source`` sent but that never arrived.
+
+        The transport finds them from sample-miss detection (DROP publishers, docs/wire.md).
+        They are lost unless the variable is one the recorder would not have logged anyway;
+        MOOS_DEBUG reports them per publisher, at most once a second (:meth:`tick`).
+        """
+        stats = self.stats
+        stats.missed += count
+        if name is None:
+            stats.lost += count
+        else:
+            var = self._vars.get(name) or self._var(name)
+            if var.verdict is not Verdict.IGNORE or var.system:
+                stats.lost += count
+        self._missed[source] = self._missed.get(source, 0) + count
+
     def _line(self, session: SessionWriter, offset: float, name: str, msg: MoosMessage) -> str:
         value = msg.value
         source = self._source(msg)
@@ -497,6 +522,14 @@ class Recorder:
             self._monitor(now)
             if self.session is not None:
                 self.post("LOGGER_DIRECTORY", self.session.directory)
+        if self._missed and now - self._timers.missed >= MISSED_REPORT_INTERVAL:
+            self._timers.missed = now
+            for source, count in self._missed.items():
+                self.debug(
+                    f"{count} samples from {source} were lost before reaching the recorder "
+                    "(DROP congestion control)"
+                )
+            self._missed.clear()
         if now - self._timers.status >= STATUS_INTERVAL:
             self._timers.status = now
             self.post(self.app_name.upper() + "_STATUS", self.status_text(now))
@@ -546,7 +579,7 @@ class Recorder:
             f"LogAuxSrc={'true' if self.config.log_aux_src else 'false'},"
             f"Received={s.received},Logged={s.logged},Excluded={s.excluded},"
             f"Throttled={s.throttled},Skewed={s.skewed},Garbled={s.garbled},Lost={s.lost},"
-            f"WriteErrors={s.write_errors},Sessions={s.sessions},Directory={directory}"
+            f"Missed={s.missed},WriteErrors={s.write_errors},Sessions={s.sessions},Directory={directory}"
         )
 
     def flush_due(self, max_delay: float = 0.01) -> bool:

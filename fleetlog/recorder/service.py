@@ -26,7 +26,13 @@ from fleetlog.errors import FleetlogError, TransportError
 from fleetlog.moos.mission import LoggerConfig
 from fleetlog.moos.patterns import chunk_includes, name_to_chunk, reduce_chunks
 from fleetlog.recorder.engine import Recorder
-from fleetlog.transport.bus import MoosPublisher, SampleDecoder, declare_fifo_subscriber
+from fleetlog.transport.bus import (
+    MissCounter,
+    MoosPublisher,
+    SampleDecoder,
+    declare_fifo_subscriber,
+    heartbeat_keys,
+)
 from fleetlog.transport.queries import (
     IncomingQuery,
     LivelinessToken,
@@ -123,6 +129,11 @@ class RecorderService:
         self._chunks: set[str] = set()
         self._session: ZenohSession | None = None
         self._var_prefix = f"{options.root}/{name_to_chunk(options.vehicle)}/var/"
+        #: samples DROP publishers lost on the way (sample-miss detection, docs/wire.md)
+        self._misses = MissCounter()
+        self._beats: _Fifo | None = None
+        #: when every subscriber was last seen empty (monotonic)
+        self._drained_at = 0.0
 
     def stop(self) -> None:
         """Ask the service to finish (safe from a signal handler or another thread)."""
@@ -181,6 +192,7 @@ class RecorderService:
             self.recorder = recorder
             for chunk in self._initial_chunks(recorder):
                 self._subscribe_chunk(chunk)
+            self._beats = declare_fifo_subscriber(session, heartbeat_keys(self._var_prefix + "*"))
             token = declare_token(session, service_key(opts.root, opts.vehicle, "recorder"))
             status_q = self._declare_status(session, recorder)
             recorder.start()
@@ -199,6 +211,9 @@ class RecorderService:
             # that reached the recorder is on disk (an undeclared subscriber's try_recv
             # fails, its handler still yields what was queued).
             handlers = [sub.handler for sub in self._subscribers]
+            if self._beats is not None:
+                self._subscribers.append(self._beats)
+                self._beats = None
             for sub in self._subscribers:
                 with contextlib.suppress(TransportError), translate_zerror("undeclare"):
                     sub.undeclare()
@@ -243,12 +258,14 @@ class RecorderService:
 
         return ServiceQueryable(session, key, answer)
 
-    @staticmethod
-    def _pump(recv: Callable[[], Any], recorder: Recorder, decoder: SampleDecoder) -> int:
+    def _pump(self, recv: Callable[[], Any], recorder: Recorder, decoder: SampleDecoder) -> int:
         """Log every sample ``recv`` yields until it yields None; return how many."""
         count = 0
         sample = recv()
         while sample is not None:
+            info = sample.source_info
+            if info is not None:
+                self._misses.seen(info, sample)
             incoming = decoder.decode(sample)
             if incoming is not None:
                 recorder.handle(incoming.message, garbled=incoming.garbled)
@@ -261,13 +278,16 @@ class RecorderService:
     def _drain(self, recorder: Recorder, deadline: float) -> None:
         """Log what is still queued (shutdown): until the FIFOs stay empty or the deadline."""
         decoder = SampleDecoder(self._var_prefix)
+        self._read_beats()
         while time.monotonic() < deadline:
             got = 0
             for sub in self._subscribers:
                 with translate_zerror("subscriber"):
                     got += self._pump(sub.try_recv, recorder, decoder)
             if not got:
+                self._drained_at = time.monotonic()
                 break
+        self._fold_misses(recorder, decoder, min_age=0.0)
         recorder.flush()
 
     def _drain_closed(self, recorder: Recorder, handlers: list[Any]) -> None:
@@ -277,7 +297,28 @@ class RecorderService:
             # A closed, empty channel raises instead of returning None: that is its end.
             with contextlib.suppress(TransportError), translate_zerror("subscriber"):
                 self._pump(handler.try_recv, recorder, decoder)
+        self._fold_misses(recorder, decoder, min_age=0.0)
         recorder.flush()
+
+    def _read_beats(self) -> None:
+        """Hand the sample-miss heartbeats received so far to the miss counter."""
+        beats = self._beats
+        if beats is None:
+            return
+        with contextlib.suppress(TransportError), translate_zerror("heartbeats"):
+            beat = beats.try_recv()
+            while beat is not None:
+                self._misses.heartbeat(beat)
+                beat = beats.try_recv()
+
+    def _fold_misses(
+        self, recorder: Recorder, decoder: SampleDecoder, min_age: float | None = None
+    ) -> None:
+        """Count in the recorder what DROP publishers lost on the way (docs/wire.md)."""
+        misses = self._misses
+        misses.settle(self._drained_at, min_age)
+        for key, source, count in misses.take():
+            recorder.missed(decoder.name_of(key), source, count)
 
     def _loop(self, recorder: Recorder) -> None:
         decoder = SampleDecoder(self._var_prefix)
@@ -288,6 +329,7 @@ class RecorderService:
         idle = 0
         stop = self._stop
         mask = _CHECK_EVERY - 1
+        seen = self._misses.seen
         while not stop.is_set():
             got = 0
             for sub in self._subscribers:
@@ -295,6 +337,11 @@ class RecorderService:
                 batch = 0
                 sample = try_recv()
                 while sample is not None:
+                    # Numbered samples (DROP publishers) are checked for gaps: 0.05 µs for
+                    # the others (bench/miss_detection.py).
+                    info = sample.source_info
+                    if info is not None:
+                        seen(info, sample)
                     incoming = decode(sample)
                     if incoming is not None:
                         handle(incoming.message, garbled=incoming.garbled)
@@ -310,8 +357,13 @@ class RecorderService:
             now = monotonic()
             if recorder.flush_due(0.0 if not got else _FLUSH_DELAY):
                 recorder.flush()
+            if not got:
+                self._drained_at = now
             if now >= next_tick:
                 next_tick = now + _TICK
+                # Heartbeats read now are trusted once the FIFOs were seen empty after this.
+                self._read_beats()
+                self._fold_misses(recorder, decoder)
                 recorder.tick()
             if got:
                 idle = 0
