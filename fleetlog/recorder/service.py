@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
-from fleetlog.errors import FleetlogError, TransportError
+from fleetlog.errors import FleetlogError, RecorderError, TransportError
 from fleetlog.moos.mission import LoggerConfig
 from fleetlog.moos.patterns import chunk_includes, name_to_chunk, reduce_chunks
 from fleetlog.recorder.engine import Recorder
@@ -40,6 +40,7 @@ from fleetlog.transport.queries import (
     ZenohSession,
     declare_token,
 )
+from fleetlog.transport.services import live_vehicles
 from fleetlog.transport.session import SessionOptions, open_session, translate_zerror
 from fleetlog.wire.keys import service_key
 from fleetlog.wire.message import MoosMessage
@@ -108,8 +109,8 @@ class _Outbox:
                 return
             try:
                 self._publisher.send(message)
-            except FleetlogError as err:
-                self._on_error(str(err))
+            except Exception as err:  # the recorder's own posts must outlive any one failure
+                self._on_error(f"could not post {message.name}: {err}")
 
     def close(self, timeout: float = 5.0) -> None:
         self._queue.put(None)
@@ -193,6 +194,7 @@ class RecorderService:
             for chunk in self._initial_chunks(recorder):
                 self._subscribe_chunk(chunk)
             self._beats = declare_fifo_subscriber(session, heartbeat_keys(self._var_prefix + "*"))
+            self._refuse_a_second_recorder(session)
             token = declare_token(session, service_key(opts.root, opts.vehicle, "recorder"))
             status_q = self._declare_status(session, recorder)
             recorder.start()
@@ -238,6 +240,26 @@ class RecorderService:
                 session.close()
                 self._session = None
         return RecorderStatsView(recorder.stats.as_dict() if recorder else {}, errors)
+
+    def _refuse_a_second_recorder(self, session: ZenohSession) -> None:
+        """Refuse to start when a recorder of the same vehicle already answers.
+
+        Two recorders of one vehicle would log each other's posts and both answer shore;
+        once both tokens exist neither can tell, so the check comes before ours is declared.
+        A peer that connects later is not seen.
+
+        Raises:
+            RecorderError: another recorder of this vehicle is up.
+        """
+        vehicle = self.options.vehicle
+        up = live_vehicles(session, self.options.root, ("recorder",), timeout=1.0)
+        if vehicle in up:
+            msg = (
+                f"a recorder of vehicle {vehicle!r} is already running "
+                f"({service_key(self.options.root, vehicle, 'recorder')} answers); "
+                "stop it or record another --vehicle"
+            )
+            raise RecorderError(msg)
 
     def _declare_status(self, session: ZenohSession, recorder: Recorder) -> ServiceQueryable:
         # A queryable drained by a thread of its own, not a callback: a callback would run

@@ -867,3 +867,29 @@ def test_running_recorder_serves_its_sessions_to_shore(
     gone = run_cli("sessions", "delta", *connect, "--timeout", "1", cwd=tmp_path, env=cli_env)
     assert gone.returncode != 0
     assert len(gone.stderr.strip().splitlines()) == 1, gone.stderr
+
+
+def test_a_second_recorder_of_the_same_vehicle_is_refused(
+    record: Callable[..., Recorder], tmp_path: Path, endpoint: str, cli_env: dict[str, str]
+) -> None:
+    first = record("--vehicle", "echo")
+    other = tmp_path / "other"
+    other.mkdir()
+    second = run_cli(
+        "record",
+        "--vehicle",
+        "echo",
+        "-e",
+        endpoint,
+        "--no-multicast-scouting",
+        cwd=other,
+        env=cli_env,
+    )
+    assert second.returncode == 1
+    (line,) = second.stderr.strip().splitlines()
+    assert line.startswith("fleetlog: error: a recorder of vehicle 'echo' is already running")
+    assert list(other.iterdir()) == []  # refused before any session was opened
+    # another vehicle on the same network is fine
+    third = record("--vehicle", "foxtrot", "-e", endpoint, listen=f"tcp/127.0.0.1:{free_port()}")
+    assert third.proc.poll() is None
+    assert first.stop(signal.SIGINT) == 0
