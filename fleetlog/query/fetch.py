@@ -4,13 +4,16 @@
 pLogger writes), each through a :class:`~fleetlog.storage.download.PartFile`:
 
 * ranges of 1 MiB, 8 in flight (measured here on a loaded 2-core machine: 4 in flight gave
-  about 240 MB/s, 8 about 400 MB/s, 16 no more), appended in order so the ``.part`` length
-  is always what arrived;
+  about 240 MB/s, 8 about 400 MB/s, 16 no more; 2 and 4 MiB ranges cost the vehicle less CPU
+  per byte but touch more fresh memory on both sides, and were slower, docs/bench.md),
+  appended in order so the ``.part`` length is always what arrived;
 * a resumed or followed file is checked first: the range that continues it starts 4 KiB
   early, and those bytes must equal the end of the ``.part`` (a vehicle that rewrote the file,
   as pLogger does with ``FileTimeStamp = false``, is caught and the file fetched again);
-* a complete file is verified against the vehicle's sha256 (asked for at the start, so the
-  vehicle hashes while it sends) and only then renamed to its real name;
+* a complete file is verified against the vehicle's sha256, computed by the vehicle from the
+  bytes it reads from its disk (asked for once the bytes are here: the vehicle hashes the
+  ranges as it serves them, so the digest is ready without reading the file again; a resumed
+  file's is asked for at the start), and only then renamed to its real name;
 * a file of a session still being written stays a ``.part``: without ``follow`` the fetch
   takes what exists and returns; with ``follow`` it keeps fetching what is appended until the
   session completes, then verifies and renames;
@@ -163,21 +166,25 @@ class _Transfer:
     def prepare(self, remote: FileInfo, complete: bool) -> None:
         """Decide whether the file is already here, and open or resume its ``.part``."""
         ctx = self.ctx
-        if complete:
-            self._digest = self._ask_digest(remote.size)
         if (
             complete
             and self.final.is_file()
             and not self.part.part.exists()
             and self.final.stat().st_size == remote.size
         ):
+            self._digest = self._ask_digest(remote.size)
             meta = self._digest_result()
             if meta.sha256 is not None and sha256_file(self.final) == meta.sha256:
                 self.status = "up to date"
                 ctx.progress.advance(ctx.vehicle, remote.size)
                 return
         resumed = self.part.open()
+        # A fresh file's digest is asked for once its bytes are here (finish): the vehicle
+        # hashes the ranges as it reads them, so by then it is known without a second read.
+        # A resumed file's is asked for now, to know whether the .part is of this version;
+        # the vehicle did not serve its start this time and hashes it meanwhile.
         if resumed and complete:
+            self._digest = self._ask_digest(remote.size)
             meta = self._digest_result()
             if not self.part.remember(
                 size=meta.size, mtime=meta.mtime, complete=True, sha256=meta.sha256

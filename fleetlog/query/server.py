@@ -15,6 +15,13 @@ requests; beyond it a request is refused at once ("busy") instead of queueing wi
 The recorder's drain thread shares no lock with any of this: the server learns the active
 session by calling the recorder's ``active`` function, which reads one attribute.
 
+Digests ahead of time. A first fetch of a file whose digest nobody computed yet makes the
+vehicle hash it while it serves it (:meth:`DigestCache.feed`): on a 2-core vehicle that CPU is
+taken from the transfer. So a *warmer* thread hashes, before anyone asks, the latest session
+when the server starts (if it is complete) and each session the recorder closes, at most half
+of a core and only while no request arrived for half a second (not by thread priority: a
+low-priority thread holding the GIL would stall the recorder).
+
 Every request ends with replies or with one ``reply_err`` whose text says what was wrong; an
 unexpected exception is reported the same way ("internal error: ...") and logged, and the
 server keeps serving.
@@ -24,6 +31,7 @@ from __future__ import annotations
 
 import logging
 import threading
+import time
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from types import TracebackType
@@ -59,6 +67,10 @@ from fleetlog.wire.query import (
 __all__ = ["LogServer"]
 
 _log = logging.getLogger("fleetlog.query.server")
+#: the warmer waits for this long without requests before it hashes on
+_WARM_QUIET = 0.5
+#: how often the warmer looks whether the recorder closed its session
+_WARM_POLL = 2.0
 _JSON = "application/json"
 _BYTES = "application/octet-stream"
 _NDJSON = "application/x-ndjson"
@@ -110,6 +122,8 @@ class LogServer:
             has its own ``recorder`` token).
         workers: threads of the light pool (ranges, latest, brief listings).
         heavy_workers: threads of the heavy pool (full listings, sha256, grep).
+        warm: hash the latest session at start and each session the recorder closes, before
+            anyone asks (see the module docstring).
 
     Raises:
         FormatError: the key root is not usable.
@@ -125,6 +139,7 @@ class LogServer:
         announce: bool = False,
         workers: int = 4,
         heavy_workers: int = 2,
+        warm: bool = True,
     ) -> None:
         self.session = session
         self.catalog = catalog
@@ -139,6 +154,9 @@ class LogServer:
         self._queryables: list[ServiceQueryable] = []
         self._token: LivelinessToken | None = None
         self._started = False
+        self._warm = warm
+        self._warmer: threading.Thread | None = None
+        self._last_request = 0.0
 
     # -- lifecycle
 
@@ -166,6 +184,11 @@ class LogServer:
         except BaseException:
             self.close()
             raise
+        if self._warm:
+            self._warmer = threading.Thread(
+                target=self._warm_loop, name="fleetlog-serve-warm", daemon=True
+            )
+            self._warmer.start()
         return self
 
     def close(self) -> None:
@@ -183,6 +206,9 @@ class LogServer:
         self._queryables.clear()
         self._light.shutdown()
         self._heavy.shutdown()
+        if self._warmer is not None:
+            self._warmer.join(5.0)
+            self._warmer = None
 
     def __enter__(self) -> LogServer:
         return self.start()
@@ -205,6 +231,7 @@ class LogServer:
         self, pool: _Pool, query: IncomingQuery, work: Callable[[IncomingQuery], None]
     ) -> None:
         self._count("requests")
+        self._last_request = time.monotonic()
         if not pool.submit(lambda: self._run(query, work)):
             self._count("refused")
             query.reply_err("the log server is busy; try again shortly")
@@ -228,6 +255,37 @@ class LogServer:
             query.reply_err(f"internal error: {type(err).__name__}: {err}")
         finally:
             query.finish()
+
+    # -- digests ahead of time
+
+    def _warm_loop(self) -> None:
+        try:
+            latest = self.catalog.latest()
+            if latest.session is not None and not latest.writing:
+                self._warm_session(latest.session)
+            previous = self.catalog.active_session()
+            while not self._closing.wait(_WARM_POLL):
+                active = self.catalog.active_session()
+                if previous is not None and active != previous:
+                    self._warm_session(previous)  # the recorder closed it
+                previous = active
+        except Exception:  # the warmer must never take the server down
+            _log.exception("hashing sessions ahead of time failed")
+
+    def _warm_session(self, session: str) -> None:
+        try:
+            self.catalog.warm_digests(session, self._closing, self._warm_pause)
+        except FleetlogError as err:
+            _log.info("hashing session %s ahead of time: %s", session, err)
+
+    def _warm_pause(self, took: float) -> None:
+        # Half a core at most, and nothing while requests are being served.
+        self._closing.wait(took)
+        while not self._closing.is_set():
+            quiet = time.monotonic() - self._last_request
+            if quiet >= _WARM_QUIET:
+                return
+            self._closing.wait(_WARM_QUIET - quiet)
 
     @staticmethod
     def _names(query: IncomingQuery, service: str) -> tuple[str, ...]:
@@ -279,7 +337,7 @@ class LogServer:
     def _file(self, query: IncomingQuery) -> None:
         session, name = self._names(query, FILE)
         request = parse_file_request(query.parameters)
-        data, meta = self.catalog.read_range(session, name, request.offset, request.length)
+        data, meta, sent = self.catalog.serve_range(session, name, request.offset, request.length)
         if request.sha256 and meta.complete:
             digest = self.catalog.file_digest(session, name, self._closing)
             if digest.size == meta.size and digest.mtime == meta.mtime:
@@ -289,6 +347,10 @@ class LogServer:
         key = file_key(self.root, self.vehicle, session, name)
         query.reply(key, data, encoding=_BYTES, attachment=meta.to_json())
         self._count("bytes", len(data))
+        # The client's request ends when the query is finished, not with the reply: finish
+        # it before hashing the range into the file's digest, or the hash delays the client.
+        query.finish()
+        sent()
 
     def _on_grep(self, query: IncomingQuery) -> None:
         self._submit(self._heavy, query, self._grep)

@@ -25,6 +25,7 @@ turn never offers half a file.
 
 from __future__ import annotations
 
+import functools
 import os
 import re
 import stat
@@ -61,6 +62,10 @@ class _Details:
     duration: float | None
     variables: int | None
     community: str | None
+
+
+def _nothing() -> None:
+    """Nothing to do after sending a range."""
 
 
 def _alog_of(session: str, names: list[str]) -> str | None:
@@ -421,10 +426,46 @@ class LogCatalog:
             StorageError: no such session or file, a path leaving the root, or an offset past
                 the end of the file.
         """
-        self._require(session)
-        data, st = self.root.read_range((session, name), offset, length)
-        meta = FileMeta(offset, len(data), st.st_size, st.st_mtime, self.is_complete(session))
+        data, meta, _ = self.serve_range(session, name, offset, length)
         return data, meta
+
+    def serve_range(
+        self, session: str, name: str, offset: int, length: int
+    ) -> tuple[bytes, FileMeta, Callable[[], None]]:
+        """Read a byte range as :meth:`read_range`, and return what to do once it is sent.
+
+        The third value hashes the bytes into the file's digest (:meth:`DigestCache.feed`)
+        when the session is complete and the file stayed the same during the read; call it
+        after the reply is sent, so the hashing never delays the bytes.
+
+        Raises:
+            FormatError: a name is not a single path component.
+            StorageError: as :meth:`read_range`.
+        """
+        self._require(session)
+        data, st, steady = self.root.read_steady((session, name), offset, length)
+        complete = self.is_complete(session)
+        meta = FileMeta(offset, len(data), st.st_size, st.st_mtime, complete)
+        if not (complete and steady and data):
+            return data, meta, _nothing
+        return data, meta, functools.partial(self.digests.feed, st, offset, data)
+
+    def warm_digests(
+        self, session: str, cancel: threading.Event, pause: Callable[[float], None]
+    ) -> None:
+        """Compute the digests of a complete session's files before anyone asks for them.
+
+        See :meth:`DigestCache.warm`; a session still being written is left alone.
+
+        Raises:
+            StorageError: the session cannot be listed.
+        """
+        if not self.has_session(session):
+            return
+        for name, _ in self._session_files(session):
+            if cancel.is_set() or not self.is_complete(session):
+                return
+            self.digests.warm(self.root, (session, name), cancel, pause)
 
     def file_digest(
         self, session: str, name: str, cancel: threading.Event | None = None

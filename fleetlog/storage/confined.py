@@ -11,7 +11,12 @@ regular file *inside* the log root or refuses:
   a regular file.
 
 sha256 digests of complete files are cached by (device, inode, size, mtime), so a client
-that resumes or verifies again does not make the vehicle hash the file again.
+that resumes or verifies again does not make the vehicle hash the file again. A file being
+served is hashed *as its ranges are read* (:meth:`DigestCache.feed`): the bytes a range
+request reads from disk are hashed once the reply is sent, in file order, so a client that
+fetches a file from its start and then asks for the digest gets it without the vehicle
+reading the file a second time. A digest asked for before the ranges reached the end is
+finished from the disk, continuing where the ranges stopped.
 """
 
 from __future__ import annotations
@@ -20,11 +25,12 @@ import hashlib
 import os
 import stat
 import threading
-from collections.abc import Iterator
+import time
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from fleetlog.errors import StorageError
+from fleetlog.errors import FormatError, StorageError
 from fleetlog.wire.query import check_component
 
 __all__ = ["ConfinedRoot", "DigestCache", "FileStat"]
@@ -36,6 +42,8 @@ _OPEN_FLAGS = (
     | getattr(os, "O_CLOEXEC", 0)
 )
 _HASH_BLOCK = 1 << 20
+#: blocks of :meth:`DigestCache.warm`: small, so a request never waits long for it
+_WARM_BLOCK = 256 << 10
 
 FileStat = os.stat_result
 
@@ -117,12 +125,30 @@ class ConfinedRoot:
             FormatError: a name is not a single path component.
             StorageError: as :meth:`open`, or ``offset`` lies past the end of the file.
         """
+        data, st, _ = self.read_steady(names, offset, length)
+        return data, st
+
+    def read_steady(
+        self, names: tuple[str, ...], offset: int, length: int
+    ) -> tuple[bytes, FileStat, bool]:
+        """As :meth:`read_range`; also say whether the file stayed the same during the read.
+
+        The third value is True when the file's identity (device, inode, size, mtime) after
+        the read is the one it had when opened: the bytes are then the file's bytes in
+        ``st``'s version, fit to be hashed as part of its digest (:meth:`DigestCache.feed`).
+
+        Raises:
+            FormatError: a name is not a single path component.
+            StorageError: as :meth:`open`, or ``offset`` lies past the end of the file.
+        """
         with self.open(*names) as (fd, st):
             if offset > st.st_size:
                 msg = f"offset {offset} is past the end of {'/'.join(names)} ({st.st_size} bytes)"
                 raise StorageError(msg)
             want = min(length, st.st_size - offset)
-            return _pread_all(fd, want, offset, "/".join(names)), st
+            data = _pread_all(fd, want, offset, "/".join(names))
+            steady = len(data) == want and _identity(os.fstat(fd)) == _identity(st)
+            return data, st, steady
 
 
 def _pread_all(fd: int, length: int, offset: int, shown: str) -> bytes:
@@ -145,64 +171,242 @@ def _identity(st: FileStat) -> tuple[int, int, int, int]:
     return (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
 
 
+class _Running:
+    """A sha256 being computed from a file's start, and the ranges waiting for their turn.
+
+    ``offset`` is how much of the file is hashed, or being hashed by the thread that set
+    ``busy``; ``pending`` holds ranges read ahead of it, by offset.
+    """
+
+    __slots__ = ("busy", "hash", "offset", "pending", "size")
+
+    def __init__(self, size: int) -> None:
+        self.hash = hashlib.sha256()
+        self.size = size
+        self.offset = 0
+        self.busy = False
+        self.pending: dict[int, bytes] = {}
+
+    def take(self) -> memoryview | None:
+        """Remove and return the pending bytes that continue the hash (None if none do).
+
+        Ranges wholly behind ``offset`` are dropped; the one that covers it is cut to start
+        there and ``offset`` is moved past it.
+        """
+        for start in list(self.pending):
+            data = self.pending[start]
+            if start + len(data) <= self.offset:
+                del self.pending[start]
+            elif start <= self.offset:
+                del self.pending[start]
+                piece = memoryview(data)[self.offset - start :]
+                self.offset += len(piece)
+                return piece
+        return None
+
+    def pending_bytes(self) -> int:
+        """Return the bytes held in ``pending``."""
+        return sum(len(data) for data in self.pending.values())
+
+
 class DigestCache:
     """sha256 of files, computed once per (device, inode, size, mtime).
 
-    Two requests for the same file hash it once: the second waits for the first. The cache
-    keeps the newest ``max_entries`` digests.
+    A digest is computed from the ranges served (:meth:`feed`), in file order, as they are
+    read; :meth:`sha256` returns it, finishing it from the disk if the ranges did not reach
+    the end. Two requests for the same file hash it once: the second waits for the first.
+    The cache keeps the newest ``max_entries`` digests and at most ``max_running`` digests in
+    progress, which hold at most ``max_pending`` bytes of ranges read ahead of their turn
+    (beyond that, a range is left for :meth:`sha256` to read again).
     """
 
-    def __init__(self, max_entries: int = 4096) -> None:
+    def __init__(
+        self, max_entries: int = 4096, *, max_running: int = 8, max_pending: int = 16 << 20
+    ) -> None:
         self._max = max_entries
+        self._max_running = max_running
+        self._max_pending = max_pending
         self._digests: dict[tuple[int, int, int, int], str] = {}
+        self._running: dict[tuple[int, int, int, int], _Running] = {}
         self._lock = threading.Lock()
-        self._busy: dict[tuple[int, int, int, int], threading.Lock] = {}
+        self._changed = threading.Condition(self._lock)
+
+    def known(self, st: FileStat) -> str | None:
+        """Return the digest of the file version ``st`` if it is already computed."""
+        with self._lock:
+            return self._digests.get(_identity(st))
+
+    def feed(self, st: FileStat, offset: int, data: bytes) -> None:
+        """Hash the bytes at ``offset`` of the file version ``st``, if they continue its digest.
+
+        Call it with bytes read from the file while its identity stayed ``st``'s
+        (:meth:`ConfinedRoot.read_steady`), of a file that is complete. A range at offset 0
+        starts a digest; a later one continues it, or waits in memory until the ranges before
+        it arrive; a range whose turn is past, or that does not fit in memory, is ignored. The
+        hashing happens in the calling thread (outside the GIL), one thread at a time per file.
+        """
+        key = _identity(st)
+        with self._lock:
+            if not data or key in self._digests:
+                return
+            run = self._running.get(key)
+            if run is None:
+                if offset != 0 or not self._make_room():
+                    return
+                run = self._running[key] = _Running(st.st_size)
+            end = offset + len(data)
+            if end <= run.offset:
+                return
+            if run.busy or offset > run.offset:
+                held = sum(r.pending_bytes() for r in self._running.values())
+                if offset not in run.pending and held + len(data) <= self._max_pending:
+                    run.pending[offset] = data
+                return
+            run.busy = True
+            piece: memoryview | None = memoryview(data)[run.offset - offset :]
+            run.offset = end
+        try:
+            while piece is not None:
+                run.hash.update(piece)
+                with self._lock:
+                    piece = run.take()
+        finally:
+            with self._lock:
+                run.busy = False
+                if run.offset >= run.size:
+                    self._finish(key, run)
+                self._changed.notify_all()
+
+    def _make_room(self) -> bool:
+        # Under the lock: drop the oldest digest in progress that nobody is hashing.
+        if len(self._running) < self._max_running:
+            return True
+        for key, run in self._running.items():
+            if not run.busy:
+                del self._running[key]
+                return True
+        return False
+
+    def _finish(self, key: tuple[int, int, int, int], run: _Running) -> str:
+        # Under the lock: the digest of the whole file is known.
+        digest = run.hash.hexdigest()
+        self._running.pop(key, None)
+        if len(self._digests) >= self._max:
+            self._digests.pop(next(iter(self._digests)))
+        self._digests[key] = digest
+        return digest
 
     def sha256(
         self, root: ConfinedRoot, names: tuple[str, ...], cancel: threading.Event | None = None
     ) -> tuple[str, FileStat]:
         """Return the hex sha256 of a file under ``root`` and the stat it belongs to.
 
+        Continues the digest the ranges served so far began (see :meth:`feed`), reading the
+        rest of the file from the disk; or hashes the whole file.
+
         Raises:
             FormatError: a name is not a single path component.
             StorageError: as :meth:`ConfinedRoot.open`; the file changed while it was being
                 hashed; or ``cancel`` was set.
         """
+        shown = "/".join(names)
         with root.open(*names) as (fd, st):
             key = _identity(st)
             with self._lock:
-                found = self._digests.get(key)
-                if found is not None:
-                    return found, st
-                busy = self._busy.setdefault(key, threading.Lock())
-            with busy:
-                with self._lock:
+                while True:
                     found = self._digests.get(key)
-                if found is None:
-                    found = _hash_fd(fd, st, "/".join(names), cancel)
+                    if found is not None:
+                        return found, st
+                    run = self._running.get(key)
+                    if run is None or not run.busy:
+                        break
+                    if cancel is not None and cancel.is_set():
+                        raise _cancelled(shown)
+                    self._changed.wait(0.5)
+                if run is None:
+                    self._make_room()
+                    run = self._running[key] = _Running(st.st_size)
+                run.busy = True
+            digest = ""
+            complete = False
+            try:
+                self._catch_up(fd, run, shown, cancel)
+                complete = run.offset == st.st_size and _identity(os.fstat(fd)) == key
+            finally:
+                with self._lock:
+                    run.busy = False
+                    if complete:
+                        digest = self._finish(key, run)
+                    else:  # its state is unknown: the next request starts over
+                        self._running.pop(key, None)
+                    self._changed.notify_all()
+            if not complete:
+                msg = f"{shown} changed while it was being hashed; it is still being written"
+                raise StorageError(msg)
+            return digest, st
+
+    def warm(
+        self,
+        root: ConfinedRoot,
+        names: tuple[str, ...],
+        cancel: threading.Event | None = None,
+        pause: Callable[[float], None] | None = None,
+    ) -> None:
+        """Compute a file's digest ahead of any request for it, politely.
+
+        The file is read in blocks and fed as served ranges are (:meth:`feed`), so a fetch
+        that starts meanwhile shares the work: the blocks its ranges already hashed are
+        skipped, and while another thread hashes the file this one waits. After each block
+        ``pause(seconds it took)`` is called (the caller sleeps, or waits for an idle moment).
+        Stops quietly when the file changes, cannot be read, or ``cancel`` is set.
+        """
+        try:
+            with root.open(*names) as (fd, st):
+                key = _identity(st)
+                while cancel is None or not cancel.is_set():
                     with self._lock:
-                        if len(self._digests) >= self._max:
-                            self._digests.pop(next(iter(self._digests)))
-                        self._digests[key] = found
+                        if key in self._digests:
+                            return
+                        run = self._running.get(key)
+                        if run is not None and run.busy:
+                            self._changed.wait(0.05)
+                            continue
+                        offset = 0 if run is None else run.offset
+                    if offset >= st.st_size:
+                        return
+                    started = time.monotonic()
+                    want = min(_WARM_BLOCK, st.st_size - offset)
+                    block = _pread_all(fd, want, offset, "/".join(names))
+                    if len(block) != want or _identity(os.fstat(fd)) != key:
+                        return  # changed: being written after all
+                    self.feed(st, offset, block)
+                    with self._lock:
+                        run = self._running.get(key)
+                        if key not in self._digests and (run is None or run.offset <= offset):
+                            return  # no room for another digest in progress: left for later
+                    if pause is not None:
+                        pause(time.monotonic() - started)
+        except (StorageError, FormatError, OSError):
+            return
+
+    def _catch_up(self, fd: int, run: _Running, shown: str, cancel: threading.Event | None) -> None:
+        # The calling thread owns ``run`` (busy): hash what is pending, else read the disk.
+        while True:
             with self._lock:
-                self._busy.pop(key, None)
-            return found, st
+                piece = run.take()
+            if piece is None:
+                if run.offset >= run.size:
+                    return
+                if cancel is not None and cancel.is_set():
+                    raise _cancelled(shown)
+                block = _pread_all(fd, min(_HASH_BLOCK, run.size - run.offset), run.offset, shown)
+                if not block:
+                    return  # truncated: the caller sees the offset short of the size
+                with self._lock:
+                    run.offset += len(block)
+                piece = memoryview(block)
+            run.hash.update(piece)
 
 
-def _hash_fd(fd: int, st: FileStat, shown: str, cancel: threading.Event | None) -> str:
-    digest = hashlib.sha256()
-    offset = 0
-    while offset < st.st_size:
-        if cancel is not None and cancel.is_set():
-            msg = f"hashing {shown} was cancelled (the server is closing)"
-            raise StorageError(msg)
-        block = _pread_all(fd, min(_HASH_BLOCK, st.st_size - offset), offset, shown)
-        if not block:
-            break
-        digest.update(block)
-        offset += len(block)
-    after = os.fstat(fd)
-    if offset != st.st_size or _identity(after) != _identity(st):
-        msg = f"{shown} changed while it was being hashed; it is still being written"
-        raise StorageError(msg)
-    return digest.hexdigest()
+def _cancelled(shown: str) -> StorageError:
+    return StorageError(f"hashing {shown} was cancelled (the server is closing)")

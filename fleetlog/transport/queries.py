@@ -62,10 +62,11 @@ class IncomingQuery:
         parameters: the selector's parameters, as sent.
     """
 
-    __slots__ = ("_query", "key", "parameters")
+    __slots__ = ("_finished", "_query", "key", "parameters")
 
     def __init__(self, query: zenoh.Query) -> None:
         self._query = query
+        self._finished = False
         self.key = str(query.key_expr)
         self.parameters = str(query.parameters)
 
@@ -91,7 +92,14 @@ class IncomingQuery:
             self._query.reply_err(message)
 
     def finish(self) -> None:
-        """Tell the querier no more replies come (without it, it waits for its timeout)."""
+        """Tell the querier no more replies come (without it, it waits for its timeout).
+
+        The querier's ``get`` ends only then, so call it as soon as the last reply is sent;
+        calling it again does nothing.
+        """
+        if self._finished:
+            return
+        self._finished = True
         with contextlib.suppress(zenoh.ZError, RuntimeError):
             self._query.drop()
 

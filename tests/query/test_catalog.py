@@ -168,6 +168,85 @@ def test_digest_cache_hashes_once(tmp_path: Path) -> None:
     assert cache.sha256(root, ("S", "f"))[0] == hashlib.sha256(data + b"x").hexdigest()
 
 
+def _ranges(
+    root: ConfinedRoot, names: tuple[str, str], size: int, step: int
+) -> list[tuple[int, bytes, os.stat_result]]:
+    out = []
+    for offset in range(0, size, step):
+        data, st, steady = root.read_steady(names, offset, step)
+        assert steady
+        out.append((offset, data, st))
+    return out
+
+
+def test_served_ranges_make_the_digest(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    (tmp_path / "S").mkdir()
+    data = os.urandom((5 << 20) + 123)
+    (tmp_path / "S" / "f").write_bytes(data)
+    root = ConfinedRoot(tmp_path)
+    want = hashlib.sha256(data).hexdigest()
+    ranges = _ranges(root, ("S", "f"), len(data), 1 << 20)
+    cache = DigestCache()
+    # Out of order, as a few workers send them: later ranges wait for their turn.
+    order = [0, 2, 1, 4, 3, 5]
+    for index in order[:-1]:
+        offset, chunk, st = ranges[index]
+        cache.feed(st, offset, chunk)
+        assert cache.known(st) is None
+    offset, chunk, st = ranges[order[-1]]
+    cache.feed(st, offset, chunk)
+    assert cache.known(st) == want
+    cache.feed(st, 0, ranges[0][1])  # a range sent again (another client) changes nothing
+
+    def no_disk(*_: object) -> bytes:
+        raise AssertionError("the digest was read from the disk again")
+
+    monkeypatch.setattr("fleetlog.storage.confined._pread_all", no_disk)
+    assert cache.sha256(root, ("S", "f")) == (want, st)
+
+
+def test_a_digest_continues_where_the_ranges_stopped(tmp_path: Path) -> None:
+    (tmp_path / "S").mkdir()
+    data = os.urandom(3 << 20)
+    (tmp_path / "S" / "f").write_bytes(data)
+    root = ConfinedRoot(tmp_path)
+    ranges = _ranges(root, ("S", "f"), len(data), 1 << 19)
+    cache = DigestCache(max_pending=1 << 19)
+    offset, chunk, st = ranges[1]
+    cache.feed(st, offset, chunk)  # no digest begun at offset 0: ignored
+    for offset, chunk, st in (ranges[0], ranges[3], ranges[4], ranges[2]):
+        cache.feed(st, offset, chunk)  # ranges[4] does not fit in memory: read again later
+    assert cache.known(st) is None
+    assert cache.sha256(root, ("S", "f"))[0] == hashlib.sha256(data).hexdigest()
+    # Ranges of an older version of the file never enter the new version's digest.
+    (tmp_path / "S" / "f").write_bytes(data[::-1])
+    cache.feed(st, 0, chunk)
+    assert cache.sha256(root, ("S", "f"))[0] == hashlib.sha256(data[::-1]).hexdigest()
+
+
+def test_served_ranges_of_a_catalog_make_the_digest(tmp_path: Path) -> None:
+    logs = tmp_path / "logs"
+    session = logs / "S"
+    session.mkdir(parents=True)
+    data = os.urandom(2 << 20)
+    (session / "S.alog").write_bytes(data)
+    old = time.time() - 60
+    os.utime(session / "S.alog", (old, old))
+    catalog = LogCatalog(logs, vehicle="v", quiet=5.0)
+    for offset in range(0, len(data), 1 << 20):
+        chunk, meta, sent = catalog.serve_range("S", "S.alog", offset, 1 << 20)
+        assert chunk == data[offset : offset + len(chunk)]
+        assert meta.complete
+        sent()
+    assert catalog.digests.known(os.stat(session / "S.alog")) == hashlib.sha256(data).hexdigest()
+    # A session still being written is not hashed as it is served.
+    (session / "S.alog").write_bytes(data)
+    _, meta, sent = catalog.serve_range("S", "S.alog", 0, 1 << 20)
+    sent()
+    assert not meta.complete
+    assert catalog.digests.known(os.stat(session / "S.alog")) is None
+
+
 def test_variable_scan_is_incremental(tmp_path: Path) -> None:
     fmt = LineFormatter()
     path = tmp_path / "x.alog"
