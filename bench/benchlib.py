@@ -114,11 +114,14 @@ class CpuMeter:
 
 
 class Helper:
-    """A helper process of this file, talking JSON lines on stdout and commands on stdin."""
+    """A helper process, talking JSON lines on stdout and commands on stdin.
 
-    def __init__(self, role: str, args: Sequence[str]) -> None:
+    It runs ``script`` (this file by default) with the role as its first argument.
+    """
+
+    def __init__(self, role: str, args: Sequence[str], script: Path = HERE) -> None:
         self.proc = subprocess.Popen(
-            [sys.executable, str(HERE), role, *args],
+            [sys.executable, str(script), role, *args],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             text=True,

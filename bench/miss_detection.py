@@ -44,18 +44,18 @@ C. Plain publishers into an AdvancedSubscriber (fleetlog must keep logging them)
 from __future__ import annotations
 
 import argparse
-import contextlib
 import json
 import os
 import socket
 import statistics
-import subprocess
 import sys
 import threading
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import IO, Any
+
+from benchlib import Helper
 
 HERE = Path(__file__).resolve()
 ROOT = "fleet"
@@ -109,43 +109,9 @@ def config(listen: str | None = None, connect: str | None = None, mode: str | No
     return conf
 
 
-class Helper:
-    """A helper process of this file: JSON events on stdout, commands on stdin."""
-
-    def __init__(self, role: str, args: Sequence[str]) -> None:
-        self.proc = subprocess.Popen(
-            [sys.executable, str(HERE), role, *args],
-            stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE,
-            text=True,
-            bufsize=1,
-        )
-
-    def read(self, timeout: float = 120.0) -> dict[str, Any]:
-        assert self.proc.stdout is not None
-        watchdog = threading.Timer(timeout, self.proc.kill)
-        watchdog.start()
-        try:
-            line = self.proc.stdout.readline()
-        finally:
-            watchdog.cancel()
-        if not line:
-            raise RuntimeError(f"helper exited ({self.proc.poll()}) without its event")
-        return dict(json.loads(line))
-
-    def send(self, command: str) -> None:
-        assert self.proc.stdin is not None
-        with contextlib.suppress(BrokenPipeError):
-            self.proc.stdin.write(command + "\n")
-            self.proc.stdin.flush()
-
-    def finish(self, timeout: float = 15.0) -> None:
-        self.send("exit")
-        try:
-            self.proc.wait(timeout)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait()
+def _helper(role: str, args: Sequence[str]) -> Helper:
+    """A helper process running this file's roles."""
+    return Helper(role, args, script=HERE)
 
 
 def _emit(**fields: object) -> None:
@@ -414,14 +380,14 @@ def run_pair(
 ) -> dict[str, Any]:
     port = free_port()
     ep = f"tcp/127.0.0.1:{port}"
-    sub = Helper(
+    sub = _helper(
         "sub",
         ["--listen", ep, "--kind", sub_kind, "--work-us", str(work_us), "--linger", str(linger)],
     )
     sub.read()
     pub_args = ["--connect", ep, "-n", str(n), "--keys", str(keys), "--kind", pub_kind]
     pub_args += ["--cc", cc, "--heartbeat", str(heartbeat), "--linger", str(linger)]
-    pub = Helper("pub", [*pub_args, "--after"] if after else pub_args)
+    pub = _helper("pub", [*pub_args, "--after"] if after else pub_args)
     try:
         pub.read()
         pub.send("go")
@@ -535,7 +501,7 @@ def _collect(n: int, keys: int, pub_kind: str) -> list[Any]:
     ep = f"tcp/127.0.0.1:{port}"
     session = zenoh.open(config(listen=ep))
     sub = session.declare_subscriber(f"{ROOT}/{VEHICLE}/var/*", zenoh.handlers.FifoChannel(1 << 21))
-    pub = Helper(
+    pub = _helper(
         "pub",
         ["--connect", ep, "-n", str(n), "--keys", str(keys), "--kind", pub_kind, "--cc", "block"],
     )
