@@ -248,13 +248,18 @@ class LogServer:
             _log.info("request %s: the reply failed: %s", query.selector, err)
         except FleetlogError as err:
             self._count("errors")
-            query.reply_err(str(err))
+            query.reply_err(self._public(str(err)))
         except Exception as err:  # a bad request must never stop the server
             self._count("errors")
             _log.exception("request %s failed", query.selector)
-            query.reply_err(f"internal error: {type(err).__name__}: {err}")
+            query.reply_err(self._public(f"internal error: {type(err).__name__}: {err}"))
         finally:
             query.finish()
+
+    def _public(self, text: str) -> str:
+        """Say paths relative to the log root: shore has no business with the vehicle's layout."""
+        root = str(self.catalog.root.path)
+        return text.replace(root + "/", "").replace(root, "<log root>")
 
     # -- digests ahead of time
 

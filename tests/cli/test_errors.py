@@ -332,3 +332,26 @@ def test_replay_says_when_its_window_holds_no_entry(
     )  # fmt: skip
     assert result.returncode == 0, result.stderr
     assert "note: no entry lies between --from and --to; nothing was played" in result.stderr
+
+
+def test_errors_from_the_vehicle_do_not_show_its_paths(
+    tmp_path: Path, cli_env: dict[str, str], procs: list[Proc]
+) -> None:
+    # Before: a grep of a corrupt alog answered with the vehicle's absolute file path.
+    logs = tmp_path / "logs"
+    bad = logs / "LOG_V_2_1_2027_____00_00_00"
+    bad.mkdir(parents=True)
+    (bad / f"{bad.name}.alog.gz").write_bytes(b"\x1f\x8b\x08\x00 not really gzip" * 20)
+    endpoint = loopback()
+    server = Proc(
+        ["serve", str(logs), "--vehicle", "v", "-l", endpoint, *ISOLATED], tmp_path, cli_env
+    )
+    procs.append(server)
+    server.wait_for("serving")
+    result = run_cli("query", "v", "-s", bad.name, "-e", endpoint, *ISOLATED, env=cli_env)
+    assert result.returncode == 1
+    (line,) = result.stderr.strip().splitlines()
+    assert f"{bad.name}.alog.gz" in line
+    assert str(logs.resolve()) not in line
+    assert str(tmp_path) not in line
+    assert server.stop() == 0
