@@ -148,67 +148,13 @@ class PlainStream(OutStream):
             _fail("close", self.path, err)
 
 
-class ZstdStream(OutStream):
-    """A zstd file made of frames, one closed at least every second."""
+class _CompressedStream(OutStream):
+    """A compressed file that makes what it holds readable at least once a second.
 
-    def __init__(self, path: Path, level: int = 3) -> None:
-        super().__init__(path)
-        try:
-            self._raw: BinaryIO = open(path, "wb")  # noqa: SIM115
-        except OSError as err:
-            _fail("create", path, err)
-        self._writer = zstandard.ZstdCompressor(level=level).stream_writer(
-            self._raw, closefd=False, write_return_read=True
-        )
-        self._dirty = False
-        self._last = 0.0
-
-    def _spill(self) -> None:
-        """Feed the pending text to the compressor (it stays in the current frame)."""
-        data = self._take()
-        if data:
-            try:
-                self._writer.write(data)
-            except OSError as err:
-                _fail("write", self.path, err)
-            self._dirty = True
-
-    def flush(self, now: float) -> None:
-        """Close the current frame if a second has passed since the last one."""
-        self._spill()
-        if self._dirty and now - self._last >= COMPRESSED_FLUSH_INTERVAL:
-            self._end_frame()
-            self._last = now
-
-    def _end_frame(self) -> None:
-        try:
-            self._writer.flush(zstandard.FLUSH_FRAME)
-            self._raw.flush()
-        except OSError as err:
-            _fail("write", self.path, err)
-        self._dirty = False
-
-    def close(self) -> None:
-        """End the last frame and close."""
-        try:
-            self._spill()
-            if self._dirty:
-                self._end_frame()
-            self._writer.close()  # type: ignore[no-untyped-call]  # zstandard's stub
-        except OSError as err:
-            _close_quietly(self._raw)
-            _fail("close", self.path, err)
-        except StorageError:
-            _close_quietly(self._raw)
-            raise
-        try:
-            self._raw.close()
-        except OSError as err:
-            _fail("close", self.path, err)
-
-
-class GzipStream(OutStream):
-    """A single gzip member with sync-flush points, as pLogger's zipper writes."""
+    Subclasses say how to feed the compressor (:meth:`_feed`), how to end a readable unit
+    (:meth:`_sync`) and how to finish the stream (:meth:`_finish`); each writes its output to
+    ``self._raw`` and may raise OSError, which is reported here naming the file.
+    """
 
     def __init__(self, path: Path) -> None:
         super().__init__(path)
@@ -216,29 +162,34 @@ class GzipStream(OutStream):
             self._raw: BinaryIO = open(path, "wb")  # noqa: SIM115
         except OSError as err:
             _fail("create", path, err)
-        self._zip = zlib.compressobj(6, zlib.DEFLATED, 31)
         self._dirty = False
         self._last = 0.0
 
-    def _out(self, data: bytes) -> None:
-        try:
-            self._raw.write(data)
-        except OSError as err:
-            _fail("write", self.path, err)
+    def _feed(self, data: bytes) -> None:
+        raise NotImplementedError
+
+    def _sync(self) -> None:
+        raise NotImplementedError
+
+    def _finish(self) -> None:
+        raise NotImplementedError
 
     def _spill(self) -> None:
-        """Feed the pending text to the compressor (it stays before the next sync point)."""
+        """Feed the pending text to the compressor (it stays before the next unit's end)."""
         data = self._take()
         if data:
-            self._out(self._zip.compress(data))
+            try:
+                self._feed(data)
+            except OSError as err:
+                _fail("write", self.path, err)
             self._dirty = True
 
     def flush(self, now: float) -> None:
-        """Make everything so far decompressible if a second has passed."""
+        """End a readable unit if a second has passed since the last one."""
         self._spill()
         if self._dirty and now - self._last >= COMPRESSED_FLUSH_INTERVAL:
-            self._out(self._zip.flush(zlib.Z_SYNC_FLUSH))
             try:
+                self._sync()
                 self._raw.flush()
             except OSError as err:
                 _fail("write", self.path, err)
@@ -246,10 +197,13 @@ class GzipStream(OutStream):
             self._last = now
 
     def close(self) -> None:
-        """Finish the gzip member and close."""
+        """Finish the stream and close the file."""
         try:
             self._spill()
-            self._out(self._zip.flush(zlib.Z_FINISH))
+            self._finish()
+        except OSError as err:
+            _close_quietly(self._raw)
+            _fail("close", self.path, err)
         except StorageError:
             _close_quietly(self._raw)
             raise
@@ -257,6 +211,46 @@ class GzipStream(OutStream):
             self._raw.close()
         except OSError as err:
             _fail("close", self.path, err)
+
+
+class ZstdStream(_CompressedStream):
+    """A zstd file made of frames, one closed at least every second."""
+
+    def __init__(self, path: Path, level: int = 3) -> None:
+        super().__init__(path)
+        self._writer = zstandard.ZstdCompressor(level=level).stream_writer(
+            self._raw, closefd=False, write_return_read=True
+        )
+
+    def _feed(self, data: bytes) -> None:
+        self._writer.write(data)
+
+    def _sync(self) -> None:
+        # Every complete frame is readable after a crash.
+        self._writer.flush(zstandard.FLUSH_FRAME)
+
+    def _finish(self) -> None:
+        if self._dirty:
+            self._writer.flush(zstandard.FLUSH_FRAME)
+            self._raw.flush()
+        self._writer.close()  # type: ignore[no-untyped-call]  # zstandard's stub
+
+
+class GzipStream(_CompressedStream):
+    """A single gzip member with sync-flush points, as pLogger's zipper writes."""
+
+    def __init__(self, path: Path) -> None:
+        super().__init__(path)
+        self._zip = zlib.compressobj(6, zlib.DEFLATED, 31)
+
+    def _feed(self, data: bytes) -> None:
+        self._raw.write(self._zip.compress(data))
+
+    def _sync(self) -> None:
+        self._raw.write(self._zip.flush(zlib.Z_SYNC_FLUSH))
+
+    def _finish(self) -> None:
+        self._raw.write(self._zip.flush(zlib.Z_FINISH))
 
 
 def open_stream(path: Path, compression: str) -> OutStream:
