@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
+import queue
+import signal
 import socket
 import subprocess
 import sys
+import threading
+import time
+from collections.abc import Sequence
 from pathlib import Path
 
 SHARED = Path(__file__).resolve().parents[1].parent / "shared"
@@ -36,3 +41,78 @@ def run_cli(
         timeout=timeout,
         check=False,
     )
+
+
+class Proc:
+    """A ``fleetlog`` subprocess whose stderr is read by a thread, killed on close."""
+
+    def __init__(self, args: Sequence[str], cwd: Path, env: dict[str, str]) -> None:
+        self.args = list(args)
+        self.proc = subprocess.Popen(
+            fleetlog_cmd(*args),
+            cwd=cwd,
+            env=env,
+            stdin=subprocess.DEVNULL,
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        self.lines: list[str] = []
+        self._queue: queue.Queue[str | None] = queue.Queue()
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        assert self.proc.stderr is not None
+        for text in self.proc.stderr:
+            self.lines.append(text)
+            self._queue.put(text)
+        self._queue.put(None)
+
+    @property
+    def stderr(self) -> str:
+        return "".join(self.lines)
+
+    def wait_for(self, needle: str, timeout: float = 15.0) -> str:
+        """Return the first stderr line holding ``needle``; raise after ``timeout``."""
+        for text in list(self.lines):
+            if needle in text:
+                return text
+        deadline = time.monotonic() + timeout
+        while (left := deadline - time.monotonic()) > 0:
+            try:
+                text = self._queue.get(timeout=left)
+            except queue.Empty:
+                break
+            if text is None:
+                break
+            if needle in text:
+                return text
+        msg = f"never printed {needle!r}; stderr: {self.stderr!r}"
+        raise AssertionError(msg)
+
+    def wait(self, timeout: float = 30.0) -> int:
+        """Wait for the exit; return the code."""
+        code = self.proc.wait(timeout)
+        self._reader.join(5)
+        return code
+
+    def stop(self, sig: int = signal.SIGINT, timeout: float = 10.0) -> int:
+        """Send ``sig`` (SIGINT) and return the exit code; fail after ``timeout`` seconds."""
+        self.proc.send_signal(sig)
+        try:
+            return self.wait(timeout)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+            self.proc.wait(5)
+            msg = f"{self.args[0]} did not stop within {timeout} s after signal {sig}"
+            raise AssertionError(msg) from None
+
+    def close(self) -> None:
+        """Kill the process if it still runs."""
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait(5)
+        self._reader.join(5)
+        if self.proc.stderr is not None:
+            self.proc.stderr.close()

@@ -1,20 +1,20 @@
-"""Replayer test support: alog sessions written byte for byte as pLogger would."""
+"""Replayer test support: alog sessions written byte for byte as pLogger would.
+
+``Proc`` (a CLI subprocess) lives in helpers.py and is re-exported for the replay tests.
+"""
 
 from __future__ import annotations
 
-import queue
-import signal
-import subprocess
-import threading
-import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from helpers import fleetlog_cmd
+from helpers import Proc
 
 from fleetlog.moos.alog import LineFormatter, format_banner
 from fleetlog.moos.blog import format_blog_record
+
+__all__ = ["Line", "MakeSession", "Proc", "write_session"]
 
 
 @dataclass(frozen=True)
@@ -70,71 +70,3 @@ def write_session(
         mission = f"ServerPort = 9000\nCommunity = {moos_community}\n\n"
         (session / f"{root}._moos").write_text(moos + mission, encoding="utf-8")
     return session
-
-
-class Proc:
-    """A ``fleetlog`` subprocess whose stderr is read by a thread, killed on close."""
-
-    def __init__(self, args: Sequence[str], cwd: Path, env: dict[str, str]) -> None:
-        self.proc = subprocess.Popen(
-            fleetlog_cmd(*args),
-            cwd=cwd,
-            env=env,
-            stdin=subprocess.DEVNULL,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.PIPE,
-            text=True,
-        )
-        self.lines: list[str] = []
-        self._queue: queue.Queue[str | None] = queue.Queue()
-        self._reader = threading.Thread(target=self._read, daemon=True)
-        self._reader.start()
-
-    def _read(self) -> None:
-        assert self.proc.stderr is not None
-        for text in self.proc.stderr:
-            self.lines.append(text)
-            self._queue.put(text)
-        self._queue.put(None)
-
-    @property
-    def stderr(self) -> str:
-        return "".join(self.lines)
-
-    def wait_for(self, needle: str, timeout: float = 15.0) -> str:
-        """Return the first stderr line holding ``needle``; raise after ``timeout``."""
-        for text in list(self.lines):
-            if needle in text:
-                return text
-        deadline = time.monotonic() + timeout
-        while (left := deadline - time.monotonic()) > 0:
-            try:
-                text = self._queue.get(timeout=left)
-            except queue.Empty:
-                break
-            if text is None:
-                break
-            if needle in text:
-                return text
-        msg = f"never printed {needle!r}; stderr: {self.stderr!r}"
-        raise AssertionError(msg)
-
-    def wait(self, timeout: float = 30.0) -> int:
-        """Wait for the exit; return the code."""
-        code = self.proc.wait(timeout)
-        self._reader.join(5)
-        return code
-
-    def stop(self, timeout: float = 10.0) -> int:
-        """SIGINT, then wait for the exit."""
-        self.proc.send_signal(signal.SIGINT)
-        return self.wait(timeout)
-
-    def close(self) -> None:
-        """Kill the process if it still runs."""
-        if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait(5)
-        self._reader.join(5)
-        if self.proc.stderr is not None:
-            self.proc.stderr.close()

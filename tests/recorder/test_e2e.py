@@ -13,19 +13,17 @@ import gzip
 import io
 import math
 import os
-import queue
 import re
 import shutil
 import signal
 import subprocess
-import threading
 import time
 from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 
 import pytest
 import zstandard
-from helpers import fleetlog_cmd, free_port, run_cli
+from helpers import Proc, free_port, run_cli
 
 from fleetlog.api import Vehicle
 from fleetlog.moos.alog import BANNER_RULE, BinaryRef, Entry, iter_entries
@@ -38,78 +36,20 @@ from fleetlog.transport.session import SessionOptions, open_session
 RUN_A = "runA_themoos_wildcard_restart"
 PAYLOAD = bytes.fromhex("00112233445566778899aabbccddeeff")
 CTIME = re.compile(r"[A-Z][a-z]{2} [A-Z][a-z]{2} [ 123]\d \d\d:\d\d:\d\d \d{4}")
-#: how long a recorder may take to start and to stop on this 2-core machine
-START_TIMEOUT = 15.0
+#: how long a recorder may take to stop on this 2-core machine (Proc.wait_for allows 15 s to start)
 STOP_TIMEOUT = 5.0
 
 
-class Recorder:
+class Recorder(Proc):
     """A ``fleetlog record`` subprocess whose stderr is read by a thread."""
 
     def __init__(self, args: Sequence[str], cwd: Path, env: dict[str, str]) -> None:
         self.started = time.time()
-        self.proc = subprocess.Popen(
-            fleetlog_cmd("record", *args),
-            cwd=cwd,
-            env=env,
-            stdin=subprocess.DEVNULL,
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.PIPE,
-            text=True,
-        )
-        self.lines: list[str] = []
-        self._queue: queue.Queue[str | None] = queue.Queue()
-        self._reader = threading.Thread(target=self._read, daemon=True)
-        self._reader.start()
-
-    def _read(self) -> None:
-        assert self.proc.stderr is not None
-        for text in self.proc.stderr:
-            self.lines.append(text)
-            self._queue.put(text)
-        self._queue.put(None)
-
-    def wait_for(self, needle: str, timeout: float = START_TIMEOUT) -> str:
-        """Return the first stderr line containing ``needle``; fail after ``timeout``."""
-        deadline = time.monotonic() + timeout
-        for text in self.lines:
-            if needle in text:
-                return text
-        while (left := deadline - time.monotonic()) > 0:
-            try:
-                got = self._queue.get(timeout=left)
-            except queue.Empty:
-                break
-            if got is None:
-                break
-            if needle in got:
-                return got
-        pytest.fail(f"recorder never printed {needle!r}; stderr: {''.join(self.lines)!r}")
+        super().__init__(["record", *args], cwd, env)
 
     def stop(self, sig: int = signal.SIGINT, timeout: float = STOP_TIMEOUT) -> int:
         """Send ``sig`` and return the exit code; fail if it takes longer than ``timeout``."""
-        self.proc.send_signal(sig)
-        try:
-            code = self.proc.wait(timeout)
-        except subprocess.TimeoutExpired:
-            self.proc.kill()
-            self.proc.wait(5)
-            pytest.fail(f"recorder did not stop within {timeout} s after signal {sig}")
-        self._reader.join(5)
-        return code
-
-    @property
-    def stderr(self) -> str:
-        return "".join(self.lines)
-
-    def close(self) -> None:
-        """Kill the process if it still runs and release its pipe."""
-        if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait(5)
-        self._reader.join(5)
-        if self.proc.stderr is not None:
-            self.proc.stderr.close()
+        return super().stop(sig, timeout)
 
 
 @pytest.fixture
