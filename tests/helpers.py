@@ -12,8 +12,10 @@ import time
 from collections.abc import Sequence
 from pathlib import Path
 
-SHARED = Path(__file__).resolve().parents[1].parent / "shared"
-REFERENCE = SHARED / "reference"
+#: test data kept in the repository: the tests read nothing outside it
+DATA = Path(__file__).resolve().parent / "data"
+#: real pLogger sessions and MOOS wire traffic, copied from ../shared/reference
+REFERENCE = DATA / "reference"
 
 
 def free_port() -> int:

@@ -1,8 +1,9 @@
 """The alog format: golden round trips of the reference logs, §2.2 rules, parse-back, truncation.
 
-The reference sessions live in ``../shared/reference`` (MOOS_FORMAT.md §10): real pLogger output
-under ``captured/`` and two synthetic sessions. The golden tests parse every alog and xlog there
-and write it back with the same configuration; the bytes must be identical.
+The reference sessions live in ``tests/data/reference`` (copied from ../shared/reference;
+MOOS_FORMAT.md §10): real pLogger output under ``captured/`` and two synthetic sessions. The
+golden tests parse every alog and xlog there and write it back with the same configuration; the
+bytes must be identical.
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import re
 from pathlib import Path
 
 import pytest
+from helpers import REFERENCE
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
@@ -40,7 +42,6 @@ from fleetlog.moos.alog import (
     split_source,
 )
 
-REFERENCE = Path(__file__).resolve().parents[2].parent / "shared" / "reference"
 LOG_SUFFIXES = (".alog", ".alog.gz", ".xlog", ".xlog.gz")
 GOLDEN = (
     sorted(p for p in REFERENCE.rglob("*") if p.name.endswith(LOG_SUFFIXES) and p.is_file())

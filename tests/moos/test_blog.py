@@ -6,6 +6,7 @@ import gzip
 from pathlib import Path
 
 import pytest
+from helpers import REFERENCE
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -13,7 +14,6 @@ from fleetlog.errors import FormatError
 from fleetlog.moos.alog import BinaryRef, Entry, LineFormatter, Variant, iter_entries
 from fleetlog.moos.blog import LOST_OFFSET, BlogRecord, format_blog_record, payload_at
 
-REFERENCE = Path(__file__).resolve().parents[2].parent / "shared" / "reference"
 BLOGS = sorted(REFERENCE.rglob("*.blog"))
 RUN_A = REFERENCE / "captured" / "runA_themoos_wildcard_restart" / "logs"
 

@@ -7,9 +7,9 @@ import dataclasses
 import re
 import string
 from collections.abc import Callable
-from pathlib import Path
 
 import pytest
+from helpers import REFERENCE
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -22,9 +22,6 @@ from fleetlog.moos.mission import (
     parse_log_spec,
     parse_mission,
 )
-
-SHARED = Path(__file__).resolve().parents[2].parent / "shared"
-REFERENCE = SHARED / "reference"
 
 
 def mission(text: str, env: dict[str, str] | None = None) -> Mission:
@@ -52,7 +49,7 @@ def assert_config_error(body: str, expected: str, head: str = "") -> None:
 
 
 # --------------------------------------------------------------------------------------------
-# The real missions in ../shared/reference
+# The real missions in tests/data/reference
 
 
 def read_reference(relative: str) -> Mission:

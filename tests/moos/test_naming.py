@@ -5,9 +5,9 @@ from __future__ import annotations
 import calendar
 import time
 from datetime import datetime
-from pathlib import Path
 
 import pytest
+from helpers import REFERENCE
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -24,8 +24,6 @@ from fleetlog.moos.naming import (
     session_root,
     unique_root,
 )
-
-REFERENCE = Path(__file__).resolve().parents[3] / "shared" / "reference"
 
 file_names = st.text(alphabet="ABC_019-.", max_size=12)
 datetimes = st.datetimes(min_value=datetime(1000, 1, 1), max_value=datetime(9999, 12, 31))

@@ -10,6 +10,7 @@ import struct
 from pathlib import Path
 
 import pytest
+from helpers import REFERENCE
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -31,7 +32,6 @@ from fleetlog.moos.slog import (
     slot_offsets,
 )
 
-REFERENCE = Path(__file__).resolve().parents[2].parent / "shared" / "reference"
 SLOGS = sorted(REFERENCE.rglob("*.slog"))
 RUN_A = REFERENCE / "captured" / "runA_themoos_wildcard_restart" / "logs"
 RUN_A_1 = RUN_A / "TEST_22_11_2026_____11_06_44" / "TEST_22_11_2026_____11_06_44.slog"

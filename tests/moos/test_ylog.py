@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from helpers import REFERENCE
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -18,7 +19,6 @@ from fleetlog.moos.ylog import (
     parse_ylog_line,
 )
 
-REFERENCE = Path(__file__).resolve().parents[2].parent / "shared" / "reference"
 YLOGS = sorted(REFERENCE.rglob("*.ylog"))
 BANNER = format_banner("./X/X.ylog", 100.0, "Thu Jan  1 00:00:00 1970", variant=Variant.EM)
 

@@ -1,4 +1,4 @@
-"""Real pLogger alogs (../shared/reference) replayed: continuation lines, duplicates, order.
+"""Real pLogger alogs (tests/data/reference) replayed: continuation lines, duplicates, order.
 
 Every reference alog is played as fast as possible into a list, and what comes out is checked
 against an independent reading of the same file: the entries in time order (file order for

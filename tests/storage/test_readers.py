@@ -12,6 +12,7 @@ from pathlib import Path
 
 import pytest
 import zstandard
+from helpers import REFERENCE
 
 from fleetlog.errors import FormatError, StorageError, UsageError
 from fleetlog.moos.alog import (
@@ -32,7 +33,6 @@ from fleetlog.storage.readers import (
     sorted_window,
 )
 
-REFERENCE = Path(__file__).resolve().parents[2].parent / "shared" / "reference"
 RUN_A1 = REFERENCE / "captured/runA_themoos_wildcard_restart/logs/TEST_22_11_2026_____11_06_44"
 RUN_A2 = REFERENCE / "captured/runA_themoos_wildcard_restart/logs/TEST_22_11_2026_____11_06_52"
 RUN_B1 = REFERENCE / "captured/runB1_ivp_compressed_markdatatype/LOG_ALPHA_22_11_2026_____11_07_42"
