@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import itertools
 import string
+import subprocess
+import sys
 
 import pytest
 import zenoh
@@ -19,6 +21,7 @@ from fleetlog.moos.patterns import (
     WildcardClassifier,
     chunk_includes,
     chunk_to_name,
+    glob_match,
     glob_to_chunk,
     globs_to_key_suffixes,
     name_to_chunk,
@@ -207,6 +210,57 @@ def test_moos_glob_matches_names_built_from_it(pair: tuple[str, str]) -> None:
     pattern, name = pair
     assert MoosGlob(pattern).matches(name)
     assert moos_wild_cmp(pattern, name)
+
+
+# A wider alphabet and longer strings than `globs`/`names`: repeated letters make many
+# partial matches, the hardest case for a matcher that places segments greedily.
+dense_globs = st.text(alphabet="ab?*", max_size=14)
+dense_names = st.text(alphabet="ab?*", max_size=24)
+
+
+@settings(max_examples=2000)
+@given(dense_globs, dense_names)
+def test_moos_glob_agrees_with_moos_wild_cmp_on_dense_text(pattern: str, name: str) -> None:
+    assert MoosGlob(pattern).matches(name) is moos_wild_cmp(pattern, name)
+    assert glob_match(pattern, name) is moos_wild_cmp(pattern, name)
+
+
+@settings(max_examples=300)
+@given(st.text(max_size=10), st.text(max_size=30))
+def test_moos_glob_agrees_with_moos_wild_cmp_on_any_text(pattern: str, name: str) -> None:
+    assert MoosGlob(pattern).matches(name) is moos_wild_cmp(pattern, name)
+
+
+# Each of these took a backtracking matcher (a regular expression `.*a.*a...`) minutes to
+# centuries on the name below (issue 10, item 2); a matcher that never backtracks answers in
+# milliseconds. They run in a child process because a regular expression stuck in C can be
+# stopped no other way; the 60 s limit only tells a hang from an answer.
+HOSTILE_GLOBS = [
+    "*a*a*a*a*a*a*a*b",
+    "*a*a*a*a*a*a*a*a*a*a*a*a*a*a*a*a*b*",
+    "*a?a*a?a*a?a*a?a*a?a*b",
+    "*?*?*?*?*?*?*?*?*?*?*?*?*b",
+    "a*a*a*a*a*a*a*a*a*a*a*a*a*a*a*a*a*a*a*a*a*a*a*a*a*a*a*a*a*a*a*b",
+]
+
+
+def test_moos_glob_never_backtracks_on_hostile_patterns() -> None:
+    script = (
+        "from fleetlog.moos.patterns import MoosGlob\n"
+        f"globs = {HOSTILE_GLOBS!r}\n"
+        "for name in ('a' * 200_000, 'ab' * 100_000, 'a' * 199_999 + 'b'):\n"
+        "    for g in globs:\n"
+        "        print(int(MoosGlob(g).matches(name)), end='')\n"
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=60, check=True
+    )
+    expected = "".join(
+        str(int(moos_wild_cmp(g, n)))
+        for n in ("a" * 2_000, "ab" * 1_000, "a" * 1_999 + "b")
+        for g in HOSTILE_GLOBS
+    )
+    assert done.stdout == expected
 
 
 def test_moos_glob_value_semantics() -> None:
