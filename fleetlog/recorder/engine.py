@@ -359,7 +359,7 @@ class Recorder:
             if var.system and verdict is not Verdict.IGNORE:
                 value = msg.value
                 if not isinstance(value, bytes):
-                    session.ylog.write(format_ylog_line(offset, name, msg.source, value))
+                    session.ylog.write(format_ylog_line(offset, name, msg.source or "?", value))
             if self.synclog is not None:
                 value = msg.value
                 # The slog holds doubles only; a binary sample shows NaN, as a string does.

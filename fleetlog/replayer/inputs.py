@@ -197,7 +197,12 @@ def _tail_end(reader: AlogReader) -> float | None:
     if start > 0:
         cut = data.find(b"\n")
         data = data[cut + 1 :] if cut >= 0 else b""
-    lines = data.decode("utf-8", "surrogateescape").splitlines(keepends=True)
+    # Split at "\n" only, as every alog reader does: splitlines() would also cut values at
+    # "\r", "\x0b", "\x85", "\u2028" and the like, which pLogger writes verbatim.
+    parts = data.decode("utf-8", "surrogateescape").split("\n")
+    lines = [part + "\n" for part in parts[:-1]]
+    if parts[-1]:
+        lines.append(parts[-1])
     offsets = [entry.offset for entry in iter_entries(lines)]
     return logstart + max(offsets) if offsets else None
 

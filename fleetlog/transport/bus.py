@@ -19,6 +19,7 @@ import zenoh.ext
 
 from fleetlog.errors import FormatError, TransportError
 from fleetlog.transport.session import translate_zerror
+from fleetlog.wire.fields import clean_name, clean_origin, clean_value, time_ok
 from fleetlog.wire.keys import var_key
 from fleetlog.wire.message import (
     ENCODINGS,
@@ -83,13 +84,19 @@ class Incoming:
 class SampleDecoder:
     """Turns Zenoh samples under one vehicle's ``var/`` prefix into MOOS messages.
 
-    Per-key work (unescaping the variable name) is cached, because the same keys repeat at
-    tens of thousands of samples a second.
+    Every field is checked here, where samples enter, by the rule of
+    :mod:`fleetlog.wire.fields`: what a log line could not hold unchanged is escaped and the
+    sample is marked garbled. Per-key and per-origin work (unescaping and checking the
+    variable name, checking source, aux and community) is cached, because the same keys and
+    origins repeat at tens of thousands of samples a second.
     """
 
     def __init__(self, var_prefix: str, clock: Callable[[], float] = time.time) -> None:
         self._prefix = var_prefix
         self._names: dict[str, str | None] = {}
+        #: keys whose name had to be escaped (their samples are garbled)
+        self._escaped: set[str] = set()
+        self._origins: dict[tuple[str, str, str], tuple[str, str, str, bool]] = {}
         self._clock = clock
 
     def name_of(self, key: str) -> str | None:
@@ -110,8 +117,23 @@ class SampleDecoder:
                     name = None
         if len(self._names) > 65536:
             self._names.clear()
+            self._escaped.clear()
+        if name is not None:
+            name, escaped = clean_name(name)
+            if escaped:
+                self._escaped.add(key)
         self._names[key] = name
         return name
+
+    def _origin(self, source: str, aux: str, community: str) -> tuple[str, str, str, bool]:
+        ident = (source, aux, community)
+        origin = self._origins.get(ident)
+        if origin is None:
+            origin = clean_origin(source, aux, community)
+            if len(self._origins) > 4096:
+                self._origins.clear()
+            self._origins[ident] = origin
+        return origin
 
     def decode(self, sample: zenoh.Sample) -> Incoming | None:
         """Decode a sample; None when its key is not a variable key of this vehicle."""
@@ -124,32 +146,81 @@ class SampleDecoder:
             name = self.name_of(key)
         if name is None:
             return None
-        payload = sample.payload.to_bytes()
         encoding = sample.encoding
-        value: float | str | bytes
         if encoding == _DOUBLE_ENCODING:
+            kind: Kind | None = Kind.DOUBLE
+        elif encoding == _STRING_ENCODING:
+            kind = Kind.STRING
+        else:
+            kind = kind_of_encoding(str(encoding))
+        attachment = sample.attachment
+        return self._build(
+            key,
+            name,
+            sample.payload.to_bytes(),
+            kind,
+            None if attachment is None else attachment.to_bytes(),
+            sample,
+        )
+
+    def decode_parts(
+        self, key: str, payload: bytes, encoding: str, attachment: bytes | None
+    ) -> Incoming | None:
+        """Decode a sample given as its parts (a sample without a Zenoh timestamp).
+
+        What :meth:`decode` does, for callers (and fuzzers) that hold no ``zenoh.Sample``.
+        """
+        name = self.name_of(key)
+        if name is None:
+            return None
+        return self._build(key, name, payload, kind_of_encoding(encoding), attachment, None)
+
+    def _build(
+        self,
+        key: str,
+        name: str,
+        payload: bytes,
+        kind: Kind | None,
+        attachment: bytes | None,
+        sample: zenoh.Sample | None,
+    ) -> Incoming:
+        value: float | str | bytes
+        if kind is Kind.DOUBLE:
             try:
                 value = float(payload)
                 garbled = False
             except ValueError:
                 _, value, garbled = decode_value(payload, Kind.DOUBLE)
-        elif encoding == _STRING_ENCODING:
-            _, value, garbled = decode_value(payload, Kind.STRING)
         else:
-            _, value, garbled = decode_value(payload, kind_of_encoding(str(encoding)))
-        attachment = sample.attachment
+            _, value, garbled = decode_value(payload, kind)
+        if type(value) is str and "\n" in value:
+            value, forged = clean_value(value)
+            garbled = garbled or forged
+        if self._escaped and key in self._escaped:
+            garbled = True
         if attachment is not None:
             try:
-                when, source, aux, community, original = attachment_fields(attachment.to_bytes())
+                when, source, aux, community, original = attachment_fields(attachment)
             except FormatError:
                 garbled = True
             else:
-                msg = new_message(name, value, when, source, aux, community, original)
-                return _new_incoming(key, msg, True, garbled)
-        stamp = zenoh_time(sample)
-        if stamp is None:
-            stamp = self._clock()
-        return _new_incoming(key, MoosMessage(name, value, stamp), False, garbled)
+                source, aux, community, escaped = self._origin(source, aux, community)
+                if original is not None and not time_ok(original):
+                    original = None
+                    escaped = True
+                if time_ok(when):
+                    msg = new_message(name, value, when, source, aux, community, original)
+                    return _new_incoming(key, msg, True, garbled or escaped)
+                # No usable time of its own: the Zenoh timestamp or the arrival time.
+                msg = new_message(
+                    name, value, self._stamp(sample), source, aux, community, original
+                )
+                return _new_incoming(key, msg, False, True)
+        return _new_incoming(key, MoosMessage(name, value, self._stamp(sample)), False, garbled)
+
+    def _stamp(self, sample: zenoh.Sample | None) -> float:
+        stamp = None if sample is None else zenoh_time(sample)
+        return self._clock() if stamp is None else stamp
 
 
 _incoming_setters = tuple(

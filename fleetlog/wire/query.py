@@ -258,8 +258,11 @@ def _unquote(name: str, raw: str) -> str:
     if _PERCENT.search(raw):
         msg = f"parameter {name!r} holds a '%' that is not followed by two hex digits"
         raise FormatError(msg)
-    # Percent escapes spell UTF-8 bytes; undecodable ones survive as surrogate escapes.
-    value = unquote_to_bytes(raw).decode("utf-8", "surrogateescape")
+    # Percent escapes spell UTF-8 bytes; undecodable ones survive as surrogate escapes (and
+    # so does a raw one, which only a local caller can pass: Zenoh's selectors are UTF-8).
+    value = unquote_to_bytes(raw.encode("utf-8", "surrogateescape")).decode(
+        "utf-8", "surrogateescape"
+    )
     if "\x00" in value:
         msg = f"parameter {name!r} holds a NUL character"
         raise FormatError(msg)
