@@ -11,19 +11,27 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import os
 import time
+import uuid
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
+from fleetlog import __version__
 from fleetlog.errors import FleetlogError, MissionError, StorageError
 from fleetlog.moos.alog import LineFormatter, Variant, source_field
 from fleetlog.moos.mission import LoggerConfig, LogSpec, parse_log_spec
 from fleetlog.moos.patterns import Verdict, WildcardClassifier, name_to_chunk
 from fleetlog.moos.slog import SlogTable, SlotPatch
 from fleetlog.moos.ylog import format_ylog_line
+from fleetlog.recorder.control import CommandHandler
+from fleetlog.storage.metafile import boot_id, host_name, mark_cut_sessions
 from fleetlog.storage.session import SessionLayout, SessionWriter
+from fleetlog.wire.control import Outcome
 from fleetlog.wire.message import MoosMessage
+from fleetlog.wire.session_meta import CLOSED, MAX_GAPS, OPEN, Gap, SessionMeta
 
 __all__ = ["SKEW_TOLERANCE", "Recorder", "RecorderStats"]
 
@@ -37,7 +45,18 @@ STATUS_INTERVAL = 2.0
 MISSED_REPORT_INTERVAL = 1.0
 _SYSTEM_VARS = ("MOOS_DEBUG", "MOOS_SYSTEM")
 
+#: the session metadata is rewritten at most this often while counters change
+META_INTERVAL = 2.0
+#: notes one session may hold
+MAX_NOTES = 64
+
 Publish = Callable[[MoosMessage], None]
+#: runs file work the drain thread must not wait for (fsync, metadata) in order, elsewhere
+Background = Callable[[Callable[[], None]], None]
+
+
+def _inline(job: Callable[[], None]) -> None:
+    job()
 
 
 @dataclass
@@ -58,6 +77,9 @@ class RecorderStats:
     write_errors: int = 0
     refused_copies: int = 0
     sessions: int = 0
+    #: commands received by any path (PLOGGER_CMD, LOGGER_RESTART, control), and refused
+    commands: int = 0
+    refused_commands: int = 0
     last_error: str = ""
 
     def as_dict(self) -> dict[str, int | str]:
@@ -81,12 +103,7 @@ class _Timers:
     monitor: float = 0.0
     status: float = 0.0
     missed: float = -1e300
-
-
-@dataclass
-class _Commands:
-    restart: str = "LOGGER_RESTART"
-    command: str = "PLOGGER_CMD"
+    meta: float = 0.0
 
 
 class Recorder:
@@ -101,6 +118,9 @@ class Recorder:
         copy_dirs: directories COPY_FILE_REQUEST may read from (resolved).
         clock: the wall clock, seconds since the epoch.
         subscribe: asks the transport to deliver a variable added by LOG_REQUEST.
+        recorder_id: this recorder's Zenoh id (for the session metadata).
+        background: runs fsync and metadata writes off the recording thread (inline by
+            default, for tests).
     """
 
     def __init__(
@@ -114,8 +134,12 @@ class Recorder:
         copy_dirs: Sequence[Path] = (),
         clock: Callable[[], float] = time.time,
         subscribe: Callable[[str], None] | None = None,
+        recorder_id: str = "",
+        background: Background = _inline,
     ) -> None:
         self.config = config
+        self.recorder_id = recorder_id
+        self._background = background
         self.vehicle = vehicle
         self._publish = publish
         self._clock = clock
@@ -145,7 +169,9 @@ class Recorder:
         )
         self._vars: dict[str, _Var] = {}
         self._sources: dict[tuple[str, str, str], str] = {}
-        self._cmd = _Commands(command=config.app_name.upper() + "_CMD")
+        self.commands = CommandHandler(self, clock)
+        self._restart_var = self.commands.restart_var
+        self._command_var = self.commands.command_var
         self.monitored = [s.var for s in specs.values() if s.monitor]
         sync_columns = [s.var for s in specs.values() if s.sync]
         self.synclog = (
@@ -164,6 +190,14 @@ class Recorder:
         self._unreadable: set[str] = set()
         #: samples lost on the way per publisher (its Zenoh id), not yet on MOOS_DEBUG
         self._missed: dict[str, int] = {}
+        #: the open session's metadata, and the counters when it opened
+        self.meta: SessionMeta | None = None
+        self._counters_at_open: dict[str, int] = {}
+        self._meta_counters: dict[str, int] = {}
+        self._host = host_name()
+        self._boot = boot_id()
+        #: sessions found cut at start, marked by the first session's first entries
+        self.cut_sessions: list[SessionMeta] = []
 
     # ---------------------------------------------------------------------------------------
     # Sessions
@@ -186,13 +220,29 @@ class Recorder:
             helm_task_file=cfg.helm_task_file,
         )
 
+    @property
+    def log_root(self) -> Path:
+        """The directory the sessions are created in (pLogger's ``Path``)."""
+        path = Path(self.config.path)
+        return path if path.is_absolute() else self._cwd / path
+
+    def current_session_name(self) -> str | None:
+        """Return the open session's directory name (any thread)."""
+        session = self.session
+        return session.root if session is not None else None
+
     def start(self) -> SessionWriter:
-        """Open the first session and announce it.
+        """Mark the sessions a dead recorder left open as cut, open the first session.
 
         Raises:
             StorageError: no session directory could be created at all.
         """
-        return self._open_session()
+        self.cut_sessions = mark_cut_sessions(self.log_root, self._clock())
+        session = self._open_session()
+        for cut in self.cut_sessions:
+            # A crash's gap is the first entry of the next session.
+            self.gap(Gap(self._clock(), "crash", None, cut.updated, self.logstart, {}, cut.session))
+        return session
 
     def _open_session(self, path: str | None = None) -> SessionWriter:
         now = self._clock()
@@ -205,6 +255,30 @@ class Recorder:
         self._pending = 0
         self._unflushed_since = None
         self.stats.sessions += 1
+        self._counters_at_open = self._counters()
+        self.meta = SessionMeta(
+            state=OPEN,
+            vehicle=self.vehicle,
+            session=session.root,
+            recorder=self.recorder_id,
+            fleetlog=__version__,
+            opened=now,
+            logstart=self.logstart,
+            updated=now,
+            mission_id=uuid.uuid4().hex,
+            part=1,
+            counters=self._session_counters(),
+            host=self._host,
+            pid=os.getpid(),
+            boot=self._boot,
+        )
+        # Visible at once (without waiting for the disk), so the session is never without
+        # its state; made durable by the background writer right after.
+        try:
+            session.write_meta(self.meta.to_bytes(), durable=False)
+        except StorageError as err:
+            self._background_failed(err)
+        self._write_meta(session, self.meta)
         if session.fallback:
             self.debug(
                 f"could not create {self.config.path}/{session.root}: "
@@ -221,7 +295,7 @@ class Recorder:
         self.post(self.app_name.upper() + "_STATUS", self.status_text(now))
         return session
 
-    def restart(self) -> None:
+    def restart(self) -> Outcome:
         """Close the current session and open a new one (LOGGER_RESTART, §6.3 with §12's fixes).
 
         Every file is reopened (xlog and blog too), LOGSTART starts afresh, and a
@@ -242,6 +316,10 @@ class Recorder:
             new = self._open_fallback()
         if new is not None:
             self.debug(f"Now Logging to : {Path(new.directory).name}")
+            return Outcome.done(
+                "restart", f"started session {new.root}", session=new.root, directory=new.directory
+            )
+        return Outcome.refused("restart", f"no session could be opened: {self.stats.last_error}")
 
     def _close_session(self) -> None:
         session = self.session
@@ -257,6 +335,28 @@ class Recorder:
             self.session = None
             self._storage_failed(err, lost=pending, fallback=False)
         self.session = None
+        self._finish(session)
+
+    def _finish(self, session: SessionWriter) -> None:
+        """Sync a closed session's files and write its last metadata, off this thread."""
+        meta = self.meta
+        self.meta = None
+        final = None
+        if meta is not None:
+            final = dataclasses.replace(meta, counters=self._session_counters()).with_state(
+                CLOSED, self._clock()
+            )
+
+        def finish() -> None:
+            try:
+                session.finish(final)
+            except StorageError as err:
+                self._background_failed(err)
+
+        if session.layout.timestamp:
+            self._background(finish)
+        else:
+            finish()  # the next session reuses the directory: its lock must be free first
 
     def stop(self) -> None:
         """Flush and close everything (clean shutdown)."""
@@ -264,8 +364,91 @@ class Recorder:
 
     def subscription_chunks(self) -> list[str]:
         """Return the variable key chunks to subscribe to: logged names and the commands."""
-        commands = [name_to_chunk(self._cmd.restart), name_to_chunk(self._cmd.command)]
+        commands = [name_to_chunk(self._restart_var), name_to_chunk(self._command_var)]
         return [*self._classifier.key_suffixes(), *commands]
+
+    # ---------------------------------------------------------------------------------------
+    # Session metadata
+
+    def _counters(self) -> dict[str, int]:
+        return {k: v for k, v in self.stats.__dict__.items() if isinstance(v, int)}
+
+    def _session_counters(self) -> dict[str, int]:
+        base = self._counters_at_open
+        return {k: v - base.get(k, 0) for k, v in self._counters().items()}
+
+    def _write_meta(self, session: SessionWriter, meta: SessionMeta) -> None:
+        data = meta.to_bytes()
+
+        def write() -> None:
+            if session.closed:
+                return  # its final version is written by finish
+            try:
+                session.write_meta(data)
+            except StorageError as err:
+                self._background_failed(err)
+
+        self._background(write)
+
+    def _update_meta(self, now: float, **changes: Any) -> None:
+        """Rewrite the open session's metadata with the current counters (and ``changes``)."""
+        session, meta = self.session, self.meta
+        if session is None or meta is None:
+            return
+        counters = self._session_counters()
+        self._meta_counters = counters
+        self.meta = dataclasses.replace(meta, counters=counters, updated=now, **changes)
+        self._timers.meta = now
+        self._write_meta(session, self.meta)
+
+    def _background_failed(self, err: StorageError) -> None:
+        """Report a failed fsync or metadata write (from the background thread)."""
+        self.stats.write_errors += 1
+        self.stats.last_error = str(err)
+        self.debug(f"write error: {err}")
+
+    def gap(self, gap: Gap) -> None:
+        """Mark a loss where it is noticed: a ``PLOGGER_GAP`` entry and a metadata gap."""
+        session = self.session
+        if session is None:
+            return
+        now = self._clock()
+        offset = max(now - self.logstart, 0.0)
+        line = self._fmt.string(offset, "PLOGGER_GAP", self.app_name, gap.moos_text())
+        try:
+            session.alog.write(line)
+        except StorageError as err:
+            self._storage_failed(err, lost=0)
+            return
+        if self._unflushed_since is None:
+            self._unflushed_since = now
+        meta = self.meta
+        if meta is not None:
+            gaps = meta.gaps if len(meta.gaps) < MAX_GAPS else meta.gaps[1:]
+            self._update_meta(now, gaps=(*gaps, gap))
+
+    def note(self, key: str, value: str) -> Outcome:
+        """Set a note on the open session (its metadata's ``notes``)."""
+        meta = self.meta
+        if meta is None or self.session is None:
+            return Outcome.refused("note", "no session is open")
+        if not key.strip() or any(ord(c) < 32 for c in key):
+            return Outcome.refused("note", "a note's key must be printable text")
+        if key not in meta.notes and len(meta.notes) >= MAX_NOTES:
+            return Outcome.refused("note", f"a session holds at most {MAX_NOTES} notes")
+        self._update_meta(self._clock(), notes={**meta.notes, key: value})
+        return Outcome.done("note", f"noted {key} on session {self.session.root}")
+
+    def status(self) -> dict[str, Any]:
+        """Return the status reply's body (any thread)."""
+        session = self.session
+        return {
+            "vehicle": self.vehicle,
+            "directory": session.directory if session is not None else None,
+            "session": session.root if session is not None else None,
+            **self.stats.as_dict(),
+            "commands": self.commands.recent(),
+        }
 
     # ---------------------------------------------------------------------------------------
     # Outgoing
@@ -287,7 +470,7 @@ class Recorder:
         spec = self._specs.get(name)
         if spec is not None:
             period = spec.period
-        elif name == self._cmd.restart:
+        elif name == self._restart_var:
             period = 0.5
         else:
             period = 0.0
@@ -323,7 +506,7 @@ class Recorder:
             stats.garbled += 1
         name = msg.name
         var = self._vars.get(name) or self._var(name)
-        is_command = name == self._cmd.restart or name == self._cmd.command
+        is_command = name == self._restart_var or name == self._command_var
         now = self._clock()
         var.last_seen = now
         if var.period > 0.0:
@@ -338,7 +521,7 @@ class Recorder:
             if verdict is not Verdict.IGNORE or var.system:
                 stats.lost += 1
             if is_command:
-                self._command(msg)
+                self.commands.moos(msg)
             return
         stamp = msg.time
         if stamp < self.logstart or abs(stamp - now) > SKEW_TOLERANCE:
@@ -373,7 +556,7 @@ class Recorder:
             if self._unflushed_since is None:
                 self._unflushed_since = now
         if is_command:
-            self._command(msg)
+            self.commands.moos(msg)
 
     def unreadable(self, key: str) -> None:
         """Count a sample whose key names no MOOS variable (a malformed escape, docs/wire.md).
@@ -421,47 +604,30 @@ class Recorder:
     # ---------------------------------------------------------------------------------------
     # Commands
 
-    def _command(self, msg: MoosMessage) -> None:
-        if msg.name == self._cmd.restart:
-            self.restart()
-            return
-        value = msg.value
-        if not isinstance(value, str):
-            kind = "binary value" if isinstance(value, bytes) else "double"
-            self.debug(f"{self._cmd.command} must be a string, got a {kind}: ignored")
-            return
-        text = value.replace(" ", "").replace("\t", "")
-        task, sep, argument = text.partition("=")
-        if not sep:
-            self.debug(f"{self._cmd.command} {value!r} is not TASK=VALUE: ignored")
-            return
-        upper = task.upper()
-        if upper == "LOG_REQUEST":
-            self._log_request(argument)
-        elif upper == "COPY_FILE_REQUEST":
-            self._copy_file(argument)
-        else:
-            self.debug(f"Dynamic command {task} is not supported")
+    # The MOOS and control paths read commands in recorder/control.py and act through these.
 
-    def _log_request(self, argument: str) -> None:
+    def log_request(self, argument: str) -> Outcome:
+        """Log one more variable (LOG_REQUEST; ``argument`` as a ``Log =`` value)."""
         try:
             spec = parse_log_spec(argument)
         except MissionError as err:
             self.debug(f"failed to process dynamic log request {argument!r}: {err.reason}")
-            return
+            return Outcome.refused("log_request", err.reason)
         if spec.var in self._specs or not self._classifier.add_log_var(spec.var):
             self.debug("failed to process dynamic log request  - see pLogger output\n")
-            return
+            return Outcome.refused("log_request", f"{spec.var} is logged already")
         self._specs[spec.var] = spec
         self._vars.pop(spec.var, None)
         if spec.monitor:
             self.monitored.append(spec.var)
+        did = f"now logging {spec.var}"
         if self._subscribe is not None:
             try:
                 self._subscribe(spec.var)
             except FleetlogError as err:
                 # Logged if a wider subscription brings it in; the operator must know.
                 self.debug(f"could not subscribe to {spec.var}: {err}")
+                did += f" (but the subscription failed: {err})"
         if self.synclog is not None:
             had_free = bool(self.synclog.placeholders)
             offset = self._clock() - self.logstart
@@ -469,9 +635,12 @@ class Recorder:
             if claim is not None:
                 if spec.sync and not had_free:
                     self.debug(f"no free slog column for {spec.var}: logged to the alog only")
+                    did += " (no free slog column: alog only)"
                 self._write_slog(claim.text, claim.patch)
+        return Outcome.done("log_request", did)
 
-    def _copy_file(self, argument: str) -> None:
+    def copy_file(self, argument: str) -> Outcome:
+        """Copy a file into the session (COPY_FILE_REQUEST), from the allowed directories."""
         requested = argument
         source = Path(requested)
         if not source.is_absolute():
@@ -480,29 +649,33 @@ class Recorder:
             # Not strict: whether a file outside the allowed directories exists is none of
             # a Zenoh peer's business, so containment is decided before existence.
             resolved = source.resolve()
-        except (OSError, RuntimeError):
+        except (OSError, RuntimeError, ValueError):
             self.debug("failed to open file for reading")
-            return
+            return Outcome.refused("copy_file", f"cannot read {requested}")
         if not any(resolved.is_relative_to(d) for d in self.copy_dirs):
             self.stats.refused_copies += 1
             self.debug(
                 f"refused COPY_FILE_REQUEST for {requested}: outside the directories "
                 "the recorder may copy from"
             )
-            return
+            return Outcome.refused(
+                "copy_file", f"{requested} is outside the directories the recorder may copy from"
+            )
         # A trailing "/" names a directory, as open() would say; pathlib would drop it.
         if requested.endswith("/") or not resolved.is_file():
             self.debug("failed to open file for reading")
-            return
+            return Outcome.refused("copy_file", f"cannot read {requested}")
         # A large copy takes a while: the lines already written reach the OS first.
         self.flush()
         if self.session is None:
             self.debug("failed to open file for writing")
-            return
+            return Outcome.refused("copy_file", "no session is open")
         try:
-            self.session.copy_file(resolved, requested)
-        except FleetlogError:
+            target = self.session.copy_file(resolved, requested)
+        except FleetlogError as err:
             self.debug("failed to open file for writing")
+            return Outcome.refused("copy_file", str(err))
+        return Outcome.done("copy_file", f"copied {requested} to {target.name}")
 
     # ---------------------------------------------------------------------------------------
     # Timers and flushing
@@ -533,6 +706,10 @@ class Recorder:
         if now - self._timers.status >= STATUS_INTERVAL:
             self._timers.status = now
             self.post(self.app_name.upper() + "_STATUS", self.status_text(now))
+        if now - self._timers.meta >= META_INTERVAL and self.meta is not None:
+            self._timers.meta = now
+            if self._session_counters() != self._meta_counters:
+                self._update_meta(now)
         # Compressed streams close a frame only when flushed a second after the last one;
         # flushing on every tick keeps that bound when no more samples arrive.
         self.flush()
@@ -627,6 +804,7 @@ class Recorder:
         self._unflushed_since = None
         with contextlib.suppress(StorageError):
             session.close()
+        self._finish(session)
         if session.fallback or self._in_fallback:
             # Already in the working directory: nothing left to fall back to. Samples are
             # counted as lost until a LOGGER_RESTART opens a session again.

@@ -22,9 +22,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Protocol
 
-from fleetlog.errors import FleetlogError, RecorderError, TransportError
+from fleetlog.errors import FleetlogError, FormatError, RecorderError, TransportError
 from fleetlog.moos.mission import LoggerConfig
 from fleetlog.moos.patterns import chunk_includes, name_to_chunk, reduce_chunks
+from fleetlog.recorder.background import BackgroundWriter
 from fleetlog.recorder.engine import Recorder
 from fleetlog.transport.bus import (
     MissCounter,
@@ -39,9 +40,11 @@ from fleetlog.transport.queries import (
     ServiceQueryable,
     ZenohSession,
     declare_token,
+    session_zid,
 )
 from fleetlog.transport.services import live_vehicles
 from fleetlog.transport.session import SessionOptions, open_session, translate_zerror
+from fleetlog.wire.control import CONTROL, MAX_REQUEST, Outcome, parse_control_request
 from fleetlog.wire.keys import service_key
 from fleetlog.wire.message import MoosMessage
 
@@ -90,11 +93,15 @@ class ServiceOptions:
 
 
 class _Outbox:
-    """Publishes the recorder's own posts from a thread of their own."""
+    """Publishes the recorder's own posts, and sends control replies, from a thread of their own.
+
+    Neither may wait in the drain thread: a put may need the recorder's own subscriber
+    drained, and a reply may wait for a congested link.
+    """
 
     def __init__(self, publisher: MoosPublisher, on_error: Callable[[str], None]) -> None:
         self._publisher = publisher
-        self._queue: queue.Queue[MoosMessage | None] = queue.Queue()
+        self._queue: queue.Queue[MoosMessage | Callable[[], None] | None] = queue.Queue()
         self._on_error = on_error
         self._thread = threading.Thread(target=self._run, name="fleetlog-outbox", daemon=True)
         self._thread.start()
@@ -102,15 +109,23 @@ class _Outbox:
     def put(self, message: MoosMessage) -> None:
         self._queue.put(message)
 
+    def call(self, job: Callable[[], None]) -> None:
+        """Run ``job`` in the outbox thread (a control reply)."""
+        self._queue.put(job)
+
     def _run(self) -> None:
         while True:
-            message = self._queue.get()
-            if message is None:
+            item = self._queue.get()
+            if item is None:
                 return
             try:
-                self._publisher.send(message)
+                if isinstance(item, MoosMessage):
+                    self._publisher.send(item)
+                else:
+                    item()
             except Exception as err:  # the recorder's own posts must outlive any one failure
-                self._on_error(f"could not post {message.name}: {err}")
+                what = item.name if isinstance(item, MoosMessage) else "a control reply"
+                self._on_error(f"could not post {what}: {err}")
 
     def close(self, timeout: float = 5.0) -> None:
         self._queue.put(None)
@@ -176,8 +191,10 @@ class RecorderService:
         publisher = MoosPublisher(session, opts.root, opts.vehicle, self.config.app_name)
         errors: list[str] = []
         outbox = _Outbox(publisher, errors.append)
+        background = BackgroundWriter(errors.append)
         token: LivelinessToken | None = None
         status_q: ServiceQueryable | None = None
+        control_q: ServiceQueryable | None = None
         recorder: Recorder | None = None
         detach: Callable[[], None] | None = None
         try:
@@ -189,6 +206,8 @@ class RecorderService:
                 cwd=opts.cwd,
                 copy_dirs=opts.copy_dirs,
                 subscribe=self._subscribe_var,
+                recorder_id=session_zid(session),
+                background=background.submit,
             )
             self.recorder = recorder
             for chunk in self._initial_chunks(recorder):
@@ -198,6 +217,7 @@ class RecorderService:
             token = declare_token(session, service_key(opts.root, opts.vehicle, "recorder"))
             status_q = self._declare_status(session, recorder)
             recorder.start()
+            control_q = self._declare_control(session, recorder, outbox)
             if opts.attach is not None:
                 detach = opts.attach(session, recorder)
             if opts.freeze_gc:
@@ -209,6 +229,11 @@ class RecorderService:
             self._loop(recorder)
             self._drain(recorder, deadline=time.monotonic() + 2.0)
         finally:
+            # No more commands; those still queued are refused, not left unanswered.
+            if control_q is not None:
+                control_q.undeclare()
+            if recorder is not None:
+                recorder.commands.cancel_queued("the recorder is stopping")
             # Stop reception first, then log what the closed channels still hold: a sample
             # that reached the recorder is on disk (an undeclared subscriber's try_recv
             # fails, its handler still yields what was queued).
@@ -226,6 +251,9 @@ class RecorderService:
                         self._drain_closed(recorder, handlers)
                     finally:
                         recorder.stop()
+                # The closed session's fsync and last metadata: before the process ends.
+                if not background.close():
+                    errors.append("the session files could not be synced within 30 s")
             finally:
                 # Whatever failed above, Zenoh is closed: a live session hangs the exit.
                 if detach is not None:
@@ -268,9 +296,7 @@ class RecorderService:
         key = service_key(self.options.root, self.options.vehicle, "status")
 
         def answer(query: IncomingQuery) -> None:
-            stats = recorder.stats.as_dict()
-            session_dir = recorder.session.directory if recorder.session else None
-            body = {"vehicle": self.options.vehicle, "directory": session_dir, **stats}
+            body = recorder.status()
             try:
                 query.reply(key, json.dumps(body).encode(), encoding="application/json")
             except TransportError:
@@ -279,6 +305,49 @@ class RecorderService:
                 query.finish()
 
         return ServiceQueryable(session, key, answer)
+
+    def _declare_control(
+        self, session: ZenohSession, recorder: Recorder, outbox: _Outbox
+    ) -> ServiceQueryable:
+        """The control service (docs/wire.md): read here, run by the one command handler.
+
+        This thread only reads the request (at most 64 KiB) and hands it over; commands
+        that change the recording run in the drain thread, one per pass, and their replies
+        go out from the outbox thread, so neither Zenoh's threads nor the drain thread wait.
+        """
+        key = service_key(self.options.root, self.options.vehicle, CONTROL)
+        commands = recorder.commands
+
+        def on_query(query: IncomingQuery) -> None:
+            payload = query.payload(MAX_REQUEST)
+            try:
+                request = parse_control_request(payload, query.parameters)
+            except FormatError as err:
+                text = (payload or b"").decode("utf-8", "replace") or query.parameters
+                commands.refuse_request(text, str(err))
+                query.reply_err(str(err))
+                query.finish()
+                return
+
+            def send(outcome: Outcome) -> None:
+                try:
+                    query.reply(key, outcome.reply(), encoding="application/json")
+                except TransportError:
+                    pass  # the querier is gone
+                finally:
+                    query.finish()
+
+            here = threading.get_ident()
+
+            def reply(outcome: Outcome) -> None:
+                if threading.get_ident() == here:
+                    send(outcome)  # answered in this thread (status, ack, refusals)
+                else:
+                    outbox.call(lambda: send(outcome))  # never from the drain thread
+
+            commands.submit(request, reply)
+
+        return ServiceQueryable(session, key, on_query)
 
     def _pump(self, recv: Callable[[], Any], recorder: Recorder, decoder: SampleDecoder) -> int:
         """Log every sample ``recv`` yields until it yields None; return how many."""
@@ -352,6 +421,7 @@ class RecorderService:
         stop = self._stop
         mask = _CHECK_EVERY - 1
         seen = self._misses.seen
+        commands = recorder.commands
         while not stop.is_set():
             got = 0
             for sub in self._subscribers:
@@ -379,6 +449,9 @@ class RecorderService:
             now = monotonic()
             if recorder.flush_due(0.0 if not got else _FLUSH_DELAY):
                 recorder.flush()
+            if commands.pending:
+                # One control command per pass, between batches (as a PLOGGER_CMD costs).
+                commands.run_queued()
             if not got:
                 self._drained_at = now
             if now >= next_tick:

@@ -13,8 +13,11 @@ time.
   component, because pLogger writes the path as it was configured (absolute, or relative to
   its working directory), which rarely resolves the same way where the server runs.
 * **complete** — a session is being written if it is the recorder's open session; without a
-  recorder (``fleetlog serve`` of old or foreign directories), if one of its files changed in
-  the last few seconds.
+  recorder (``fleetlog serve`` of old or foreign directories), if its metadata says ``open``
+  and a live recorder holds it, or, for a session without metadata (real pLogger's), if one
+  of its files changed in the last few seconds.
+* **state** — the session metadata's ``open``/``closed``/``cut``; an ``open`` session whose
+  recorder is no longer alive is listed as ``cut`` (the next recorder start marks it so).
 * Details read from the alog (LOGSTART, duration, vehicle, variables count) are cached by the
   alog's size and modification time, so listing again costs a ``stat`` per file.
 
@@ -39,7 +42,9 @@ from fleetlog.errors import FormatError, StorageError
 from fleetlog.moos.naming import HINT_FILE_NAME, parse_hint_file, parse_session_root
 from fleetlog.storage.alogscan import HeadInfo, VariableScan, is_compressed, read_head, tail_offset
 from fleetlog.storage.confined import ConfinedRoot, DigestCache
+from fleetlog.storage.metafile import read_meta, recorder_alive
 from fleetlog.wire.query import FileInfo, FileMeta, LatestInfo, SessionInfo, check_component
+from fleetlog.wire.session_meta import CUT, META_NAME, OPEN, SessionMeta
 
 __all__ = ["ALOG_SUFFIXES", "QUIET_SECONDS", "LogCatalog"]
 
@@ -49,6 +54,8 @@ QUIET_SECONDS = 5.0
 _HINT_MAX = 4096
 #: a fetch in progress (fleetlog.storage.download): never listed, never served as a log
 _DOWNLOAD_SUFFIXES = (".part", ".part.json", ".part.json.tmp")
+#: the metadata file while it is being replaced (never listed)
+_META_TMP = META_NAME + ".tmp"
 _COMMUNITY_LINE = re.compile(r"^[ \t]*community[ \t]*=(.*)$", re.IGNORECASE | re.MULTILINE)
 _MOOS_HEAD = 64 << 10
 
@@ -137,7 +144,7 @@ class LogCatalog:
                 check_component(entry.name, "file")
             except FormatError:
                 continue
-            if entry.name.endswith(_DOWNLOAD_SUFFIXES):
+            if entry.name.endswith(_DOWNLOAD_SUFFIXES) or entry.name == _META_TMP:
                 continue
             if entry.is_symlink() and not self.root.contains(entry.path):
                 continue  # a symlink leaving the root is never listed (nor served)
@@ -228,10 +235,33 @@ class LogCatalog:
         """
         if self._active is not None:
             return session != self.active_session()
+        meta = self._meta(session)
+        if meta is not None:
+            return meta.state != OPEN or not recorder_alive(self.root.resolve(session), meta)
         if files is None:
             files = self._session_files(session)
         newest = max((st.st_mtime for _, st in files), default=0.0)
         return newest < self._clock() - self._quiet
+
+    def _meta(self, session: str) -> SessionMeta | None:
+        """Read a session's metadata; None without one, or one that cannot be read."""
+        try:
+            return read_meta(self.root.resolve(session))
+        except (StorageError, FormatError):
+            return None
+
+    def state(self, session: str, meta: SessionMeta | None = None) -> str | None:
+        """Return the session's state: ``open``, ``closed``, ``cut``, or None without metadata.
+
+        An ``open`` session is ``cut`` when no live recorder holds it.
+        """
+        if meta is None:
+            meta = self._meta(session)
+        if meta is None:
+            return None
+        if meta.state != OPEN or session == self.active_session():
+            return meta.state
+        return OPEN if recorder_alive(self.root.resolve(session), meta) else CUT
 
     # -- sessions
 
@@ -249,12 +279,16 @@ class LogCatalog:
         self._require(session)
         files = self._session_files(session)
         parsed = parse_session_root(session)
+        meta = self._meta(session)
+        synced = meta.clock.get("synchronized") if meta is not None else None
         info = SessionInfo(
             name=session,
             files=tuple(FileInfo(name, st.st_size, st.st_mtime) for name, st in files),
             complete=self.is_complete(session, files),
             stamp=parsed[1].replace(microsecond=0).isoformat() if parsed else None,
             alog=_alog_of(session, [name for name, _ in files]),
+            state=self.state(session, meta),
+            synced=synced if isinstance(synced, bool) else None,
         )
         if brief or info.alog is None:
             return info
@@ -270,6 +304,8 @@ class LogCatalog:
             duration=details.duration,
             vehicle=details.community or self.vehicle,
             variables=details.variables,
+            state=info.state,
+            synced=info.synced,
         )
 
     def sessions(self, *, brief: bool = False) -> list[SessionInfo]:

@@ -13,6 +13,8 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
+import stat
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,7 +29,9 @@ from fleetlog.moos.naming import (
     session_root,
     unique_root,
 )
+from fleetlog.storage.metafile import DirLock, write_meta
 from fleetlog.storage.streams import OutStream, PlainStream, open_stream
+from fleetlog.wire.session_meta import SessionMeta
 
 __all__ = ["SessionLayout", "SessionWriter", "copy_mission"]
 
@@ -112,6 +116,12 @@ class SessionWriter:
         self.closed = False
         #: problems that did not stop the session (the hint file could not be written)
         self.warnings: list[str] = []
+        #: held from open until :meth:`finish`: this recorder is alive
+        self.lock: DirLock | None = None
+        #: files copied in by COPY_FILE_REQUEST (fsynced at the end like the logs)
+        self.copies: list[Path] = []
+        #: taken by :meth:`sync` and :meth:`close`, so a descriptor is never fsynced closed
+        self._sync_lock = threading.Lock()
 
     # ----------------------------------------------------------------------------------------
     @classmethod
@@ -169,12 +179,16 @@ class SessionWriter:
                 )
                 raise StorageError(msg) from err
         writer = cls(layout, directory, root, logstart, base, fallback)
+        # Locked before anything says "open": a recorder starting meanwhile never takes a
+        # session being created for a cut one.
+        writer.lock = DirLock(writer.dir_path)
         try:
             writer._open_files(now)
         except StorageError:
             # Closing flushes the same broken file again; the first error is the one to report.
             with contextlib.suppress(StorageError):
                 writer.close()
+            writer.lock.release()
             raise
         return writer
 
@@ -286,18 +300,59 @@ class SessionWriter:
         except OSError as err:
             msg = f"cannot copy {source} to {target}: {err.strerror}"
             raise StorageError(msg) from err
+        if target not in self.copies:
+            self.copies.append(target)
         return target
+
+    def write_meta(self, meta: SessionMeta | bytes, *, durable: bool = True) -> None:
+        """Replace the session's metadata file atomically (write, fsync, rename, fsync).
+
+        Raises:
+            StorageError: it could not be written.
+        """
+        write_meta(self.dir_path, meta, durable=durable)
 
     def flush(self, now: float) -> None:
         """Hand every stream's buffer to the OS (compressed ones per their interval)."""
         for stream in self._streams:
             stream.flush(now)
 
+    def sync(self) -> None:
+        """Sync every open stream to the disk (what was flushed to the OS survives a power cut).
+
+        Safe from another thread while the recorder writes; does nothing once closed.
+
+        Raises:
+            StorageError: a file could not be synced (names it and why).
+        """
+        with self._sync_lock:
+            if self.closed:
+                return
+            for stream in self._streams:
+                try:
+                    os.fsync(stream.fileno())
+                except (OSError, ValueError) as err:
+                    reason = err.strerror if isinstance(err, OSError) else str(err)
+                    msg = f"cannot sync {stream.path}: {reason}"
+                    raise StorageError(msg) from err
+
+    def paths(self) -> list[Path]:
+        """Return the session's files: its logs and the copies made into it."""
+        return (
+            [s.path for s in self._streams]
+            + [self._file(ext) for ext in ("._moos", "._hoof") if self._file(ext).exists()]
+            + list(self.copies)
+        )
+
     def close(self) -> None:
-        """Close every stream; the first failure is raised after all were tried."""
-        if self.closed:
-            return
-        self.closed = True
+        """Close every stream; the first failure is raised after all were tried.
+
+        The directory stays locked until :meth:`finish`.
+        """
+        with self._sync_lock:
+            if self.closed:
+                return
+            self.closed = True
         first: StorageError | None = None
         for stream in self._streams:
             try:
@@ -307,6 +362,41 @@ class SessionWriter:
                     first = err if isinstance(err, StorageError) else StorageError(str(err))
         if first is not None:
             raise first
+
+    def finish(self, meta: SessionMeta | bytes | None) -> None:
+        """After :meth:`close`: fsync the files, write the last metadata, unlock.
+
+        The files are synced through new descriptors (fsync applies to the file, whichever
+        descriptor asks), so this may run in another thread while the recorder goes on.
+        Nothing is written into the session afterwards.
+
+        Raises:
+            StorageError: a file or the metadata could not be synced or written; the lock
+                is released either way.
+        """
+        try:
+            first: StorageError | None = None
+            for path in self.paths():
+                try:
+                    fd = os.open(path, os.O_RDONLY | os.O_CLOEXEC | os.O_NONBLOCK)
+                    try:
+                        if stat.S_ISREG(os.fstat(fd).st_mode):
+                            os.fsync(fd)
+                    finally:
+                        os.close(fd)
+                except FileNotFoundError:
+                    continue  # the directory was removed: nothing left to sync
+                except OSError as err:
+                    if first is None:
+                        msg = f"cannot sync {path}: {err.strerror}"
+                        first = StorageError(msg)
+            if meta is not None:
+                self.write_meta(meta)
+            if first is not None:
+                raise first
+        finally:
+            if self.lock is not None:
+                self.lock.release()
 
 
 def _mkdir(path: Path) -> None:

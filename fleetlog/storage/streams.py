@@ -81,6 +81,10 @@ class OutStream:
         """Hand what was written to the OS (compressed streams: when their interval is due)."""
         raise NotImplementedError
 
+    def fileno(self) -> int:
+        """Return the file's descriptor (for fsync from another thread)."""
+        raise NotImplementedError
+
     def close(self) -> None:
         """Finish the stream (compressed streams end their frame or gzip member) and close."""
         raise NotImplementedError
@@ -112,6 +116,10 @@ class PlainStream(OutStream):
             self._file.write(data)
         except OSError as err:
             _fail("write", self.path, err)
+
+    def fileno(self) -> int:
+        """Return the file's descriptor."""
+        return self._file.fileno()
 
     def tell(self) -> int:
         """Return the current size of what was written."""
@@ -164,6 +172,10 @@ class _CompressedStream(OutStream):
             _fail("create", path, err)
         self._dirty = False
         self._last = 0.0
+
+    def fileno(self) -> int:
+        """Return the file's descriptor."""
+        return self._raw.fileno()
 
     def _feed(self, data: bytes) -> None:
         raise NotImplementedError

@@ -37,6 +37,7 @@ __all__ = [
     "ServiceQueryable",
     "ZenohSession",
     "declare_token",
+    "session_zid",
     "start_query",
 ]
 
@@ -60,6 +61,8 @@ class IncomingQuery:
     Attributes:
         key: the query's key expression (it may hold wildcards).
         parameters: the selector's parameters, as sent.
+
+    The payload, which only some services read, is read with :meth:`payload`.
     """
 
     __slots__ = ("_finished", "_query", "key", "parameters")
@@ -69,6 +72,19 @@ class IncomingQuery:
         self._finished = False
         self.key = str(query.key_expr)
         self.parameters = str(query.parameters)
+
+    def payload(self, limit: int) -> bytes | None:
+        """Return the query's payload (None without one).
+
+        One over ``limit`` bytes comes back as ``limit + 1`` zero bytes, so the caller can
+        refuse it without copying it whole.
+        """
+        body = self._query.payload
+        if body is None:
+            return None
+        if len(body) > limit:
+            return bytes(limit + 1)
+        return body.to_bytes()
 
     @property
     def selector(self) -> str:
@@ -202,11 +218,16 @@ class ReplyItem:
 class PendingQuery:
     """A query in flight; iterate it for its replies (it ends when the query does)."""
 
-    def __init__(self, session: zenoh.Session, selector: str, timeout: float) -> None:
+    def __init__(
+        self, session: zenoh.Session, selector: str, timeout: float, payload: bytes | None = None
+    ) -> None:
         self.selector = selector
         with translate_zerror(f"query {selector!r}"):
             self._handler = session.get(
-                selector, consolidation=zenoh.ConsolidationMode.NONE, timeout=timeout
+                selector,
+                consolidation=zenoh.ConsolidationMode.NONE,
+                timeout=timeout,
+                payload=payload,
             )
 
     def __iter__(self) -> Iterator[ReplyItem]:
@@ -227,10 +248,18 @@ class PendingQuery:
             raise TransportError(msg) from err
 
 
-def start_query(session: zenoh.Session, selector: str, *, timeout: float) -> PendingQuery:
-    """Send a query without waiting for its replies.
+def start_query(
+    session: zenoh.Session, selector: str, *, timeout: float, payload: bytes | None = None
+) -> PendingQuery:
+    """Send a query (with ``payload``, e.g. a control request) without waiting for replies.
 
     Raises:
         TransportError: the query could not be sent.
     """
-    return PendingQuery(session, selector, timeout)
+    return PendingQuery(session, selector, timeout, payload)
+
+
+def session_zid(session: zenoh.Session) -> str:
+    """Return the session's Zenoh id, as text (the recorder id of the session metadata)."""
+    with translate_zerror("session id"):
+        return str(session.zid())

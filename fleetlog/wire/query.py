@@ -615,6 +615,10 @@ class SessionInfo:
         vehicle: the MOOS community that wrote it: the ``DB_TIME`` source ``MOOSDB_<v>``, the
             ``._moos`` Community, or the serving vehicle.
         variables: how many distinct variables the alog holds.
+        state: from the session metadata: ``open``, ``closed``, or ``cut`` (its recorder
+            died with it open); None for a session without metadata (real pLogger's).
+        synced: whether the recording host's clock was synchronised when the session
+            opened (session metadata); None when unknown.
     """
 
     name: str
@@ -626,6 +630,8 @@ class SessionInfo:
     duration: float | None = None
     vehicle: str | None = None
     variables: int | None = None
+    state: str | None = None
+    synced: bool | None = None
 
     @property
     def size(self) -> int:
@@ -643,6 +649,8 @@ class SessionInfo:
             "duration": self.duration,
             "vehicle": self.vehicle,
             "variables": self.variables,
+            "state": self.state,
+            "synced": self.synced,
             "size": self.size,
             "files": [f.as_json() for f in self.files],
         }
@@ -679,6 +687,8 @@ class SessionInfo:
             None if duration is None else float(duration),
             _opt(obj, "vehicle", str, what),
             _opt(obj, "variables", int, what),
+            _opt(obj, "state", str, what),
+            _opt(obj, "synced", bool, what),
         )
 
 

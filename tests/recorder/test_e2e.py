@@ -38,6 +38,8 @@ PAYLOAD = bytes.fromhex("00112233445566778899aabbccddeeff")
 CTIME = re.compile(r"[A-Z][a-z]{2} [A-Z][a-z]{2} [ 123]\d \d\d:\d\d:\d\d \d{4}")
 #: how long a recorder may take to stop on this 2-core machine (Proc.wait_for allows 15 s to start)
 STOP_TIMEOUT = 5.0
+#: the session metadata file beside pLogger's files (docs/wire.md)
+META = ".fleetlog-session.json"
 
 
 class Recorder(Proc):
@@ -223,7 +225,7 @@ def test_record_poke_and_api_into_a_plogger_session(
     assert re.fullmatch(r"E2E_\d{1,2}_\d{1,2}_\d{4}_____\d\d_\d\d_\d\d", root)
     assert sorted(p.name for p in directory.iterdir()) == sorted(
         [f"{root}{ext}" for ext in (".alog", ".xlog", ".ylog", ".slog", ".blog", "._moos")]
-        + ["notes._txt"]
+        + ["notes._txt", META]
     )
     assert (tmp_path / ".LastOpenedMOOSLogDirectory").read_text() == (
         f"LastOpenedLoggingDirectory=./{root}\n"
@@ -413,9 +415,13 @@ def test_reference_mission_runs_unchanged(
     def names(d: Path, root: str) -> set[str]:
         return {p.name.replace(root, "ROOT") for p in d.iterdir()}
 
-    # the same file set; after the restart the xlog and blog exist too (§12)
-    assert names(mine[0], roots[0]) == names(ref_dirs[0], ref_roots[0])
-    assert names(mine[1], roots[1]) == names(ref_dirs[1], ref_roots[1]) | {"ROOT.xlog", "ROOT.blog"}
+    # the same file set plus the metadata; after the restart the xlog and blog exist too (§12)
+    assert names(mine[0], roots[0]) == names(ref_dirs[0], ref_roots[0]) | {META}
+    assert names(mine[1], roots[1]) == names(ref_dirs[1], ref_roots[1]) | {
+        "ROOT.xlog",
+        "ROOT.blog",
+        META,
+    }
     assert (mine[0] / "alpha._bhv").read_bytes() == (ref_dirs[0] / "alpha._bhv").read_bytes()
     for mine_dir, ref_dir, root, ref_root in zip(mine, ref_dirs, roots, ref_roots, strict=True):
         body = read(mine_dir / f"{root}._moos").split(BANNER_RULE + "\n", 2)[2]
@@ -576,7 +582,7 @@ def test_no_mission_logs_everything_with_liveliness_and_sigterm(
     assert directory.name.startswith("MOOSLog_")
     root = directory.name
     assert sorted(p.name for p in directory.iterdir()) == sorted(
-        f"{root}{ext}" for ext in (".alog", ".ylog", ".blog")
+        [f"{root}{ext}" for ext in (".alog", ".ylog", ".blog")] + [META]
     )
     logged = entries(directory / f"{root}.alog")
     got = {(e.key, e.value) for e in logged}
@@ -731,7 +737,14 @@ def test_log_request_subscribes_once_and_compressed_streams_finish(
     root = directory.name
     ext = ".gz" if compression == "gzip" else ".zst"
     assert sorted(p.name for p in directory.iterdir()) == sorted(
-        [f"{root}.alog{ext}", f"{root}.xlog{ext}", f"{root}.ylog", f"{root}.blog", f"{root}._moos"]
+        [
+            f"{root}.alog{ext}",
+            f"{root}.xlog{ext}",
+            f"{root}.ylog",
+            f"{root}.blog",
+            f"{root}._moos",
+            META,
+        ]
     )
     data = (directory / f"{root}.alog{ext}").read_bytes()
     xdata = (directory / f"{root}.xlog{ext}").read_bytes()

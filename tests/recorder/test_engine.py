@@ -35,6 +35,8 @@ from fleetlog.wire.message import MoosMessage
 #: LOGSTART of every rig: exactly representable, so offsets like 0.75 stay exact
 T0 = 1_800_000_000.25
 DUP = "failed to process dynamic log request  - see pLogger output\n"
+#: the session metadata file beside pLogger's files (docs/wire.md)
+META = ".fleetlog-session.json"
 
 
 class FakeClock:
@@ -615,7 +617,8 @@ def test_logger_restart_opens_a_complete_new_session(
     rig.rec.tick()
     names = sorted(p.name for p in rig.dir.iterdir())
     assert names == sorted(
-        f"{new_root}{ext}" for ext in (".alog", ".xlog", ".ylog", ".slog", ".blog", "._moos")
+        [f"{new_root}{ext}" for ext in (".alog", ".xlog", ".ylog", ".slog", ".blog", "._moos")]
+        + [META]
     )
     new = rig.entries()
     assert [(e.key, e.offset) for e in new[:3]] == [
@@ -891,7 +894,7 @@ def test_compress_zstd_flushes_a_frame_within_a_second(
     rig = rigs(COMPRESS_BLOCK.format(mode="true", xlog="true"))
     root = rig.root
     assert sorted(p.name for p in rig.dir.iterdir()) == sorted(
-        f"{root}{ext}" for ext in (".alog.zst", ".xlog.zst", ".ylog", ".blog")
+        [f"{root}{ext}" for ext in (".alog.zst", ".xlog.zst", ".ylog", ".blog")] + [META]
     )
     feed_some(rig)
     rig.clock.at(0.5)
@@ -927,7 +930,7 @@ def test_compress_gzip_is_plogger_gz(rigs: Callable[..., Rig]) -> None:
     rig = rigs(COMPRESS_BLOCK.format(mode="gzip", xlog="false"))
     root = rig.root
     assert sorted(p.name for p in rig.dir.iterdir()) == sorted(
-        f"{root}{ext}" for ext in (".alog.gz", ".xlog.gz", ".ylog", ".blog")
+        [f"{root}{ext}" for ext in (".alog.gz", ".xlog.gz", ".ylog", ".blog")] + [META]
     )
     feed_some(rig)
     rig.clock.at(1.25)
@@ -1028,15 +1031,16 @@ def test_write_error_mid_session_is_counted_posted_and_survived(
     rig.send("A", 0.0, at=0.5)
     rig.rec.flush()
     size = rig.file(".alog").stat().st_size
-    file_size_limit(size + 200)  # room for the fallback's banners, not for 20 more lines
+    # room for the fallback's banners and metadata, not for 200 more lines
+    file_size_limit(size + 2000)
     try:
-        for i in range(20):
+        for i in range(200):
             rig.send("A", float(i), at=1.0)
         rig.rec.flush()  # the buffered lines reach the OS only now, and fail
     finally:
         file_size_limit(resource.RLIM_INFINITY)
     stats = rig.rec.stats
-    assert stats.lost == 20
+    assert stats.lost == 200
     assert stats.write_errors == 1
     assert "File too large" in stats.last_error
     debugs = [str(m.value) for m in rig.posted if m.name == "MOOS_DEBUG"]

@@ -1,0 +1,207 @@
+"""The recorder's one command handler: PLOGGER_CMD, LOGGER_RESTART and the control service.
+
+Every command, whatever path it came by, is read here, run through the engine, and its
+outcome kept in a ring of the last 64 (``commands`` in the status), so the paths refuse,
+count and report alike (docs/wire.md, "Control").
+
+Threads: MOOS commands arrive in the recorder's drain thread (:meth:`CommandHandler.moos`)
+and run there at once, as pLogger runs them. Control queries arrive in the control
+queryable's own thread: ``status`` and ``ack`` are answered there (they read counters, or
+append one line beside the sessions); commands that change what is recorded are queued for
+the drain thread (:meth:`CommandHandler.submit`), which runs at most one per pass between
+batches of samples (:meth:`CommandHandler.run_queued`), so a flood of queries costs the
+recording what as many PLOGGER_CMD posts would, and a full queue refuses at once.
+"""
+
+from __future__ import annotations
+
+import collections
+import threading
+import time
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
+
+from fleetlog.errors import StorageError
+from fleetlog.storage.metafile import append_ack
+from fleetlog.wire.control import CommandRecord, ControlRequest, Outcome
+from fleetlog.wire.message import MoosMessage
+
+if TYPE_CHECKING:
+    from fleetlog.recorder.engine import Recorder
+
+__all__ = ["RING_SIZE", "CommandHandler", "Reply"]
+
+#: outcomes kept for the status reply
+RING_SIZE = 64
+#: control commands waiting for the drain thread; more are refused at once
+QUEUE_LIMIT = 16
+#: commands that fleetlog will take once recording modes exist (issue 17)
+NOT_YET = ("pause", "resume", "split", "snapshot")
+#: commands run in the control thread (they do not touch what is being recorded)
+_IN_CONTROL_THREAD = ("status", "ack", *NOT_YET)
+
+#: sends a control reply (from the drain thread through the recorder's outbox)
+Reply = Callable[[Outcome], None]
+
+
+class CommandHandler:
+    """Reads, runs, counts and remembers the recorder's commands.
+
+    Args:
+        recorder: the engine the commands act upon.
+        clock: the wall clock.
+    """
+
+    def __init__(self, recorder: Recorder, clock: Callable[[], float] = time.time) -> None:
+        self._rec = recorder
+        self._clock = clock
+        self._ring: collections.deque[CommandRecord] = collections.deque(maxlen=RING_SIZE)
+        self._ring_lock = threading.Lock()
+        self._queue: collections.deque[tuple[ControlRequest, Reply]] = collections.deque()
+        self._queue_lock = threading.Lock()
+        #: the names of the two MOOS command variables (after the app name)
+        self.restart_var = "LOGGER_RESTART"
+        self.command_var = recorder.app_name.upper() + "_CMD"
+
+    # -- the ring
+
+    def _remember(self, outcome: Outcome, *, when: float, via: str, source: str, text: str) -> None:
+        stats = self._rec.stats
+        stats.commands += 1
+        if not outcome.ok:
+            stats.refused_commands += 1
+        record = CommandRecord.of(outcome, time=when, via=via, source=source, text=text)
+        with self._ring_lock:
+            self._ring.append(record)
+
+    def recent(self) -> list[dict[str, Any]]:
+        """Return the last 64 outcomes, oldest first (any thread)."""
+        with self._ring_lock:
+            return [r.as_json() for r in self._ring]
+
+    # -- MOOS commands (drain thread)
+
+    def moos(self, msg: MoosMessage) -> Outcome:
+        """Run a PLOGGER_CMD or LOGGER_RESTART message, as pLogger does (§6.3, §6.5)."""
+        value = msg.value
+        if msg.name == self.restart_var:
+            outcome = self._rec.restart()
+            text = value if isinstance(value, str) else repr(value)
+        else:
+            outcome = self._plogger_cmd(value)
+            text = value if isinstance(value, str) else repr(value)
+        self._remember(outcome, when=msg.time, via=msg.name, source=msg.source, text=text)
+        return outcome
+
+    def _plogger_cmd(self, value: float | str | bytes) -> Outcome:
+        rec = self._rec
+        var = self.command_var
+        if not isinstance(value, str):
+            kind = "binary value" if isinstance(value, bytes) else "double"
+            rec.debug(f"{var} must be a string, got a {kind}: ignored")
+            return Outcome.refused("?", f"{var} must be a string, got a {kind}")
+        text = value.replace(" ", "").replace("\t", "")
+        task, sep, argument = text.partition("=")
+        if not sep:
+            rec.debug(f"{var} {value!r} is not TASK=VALUE: ignored")
+            return Outcome.refused("?", f"{var} {value!r} is not TASK=VALUE")
+        upper = task.upper()
+        if upper == "LOG_REQUEST":
+            return rec.log_request(argument)
+        if upper == "COPY_FILE_REQUEST":
+            return rec.copy_file(argument)
+        rec.debug(f"Dynamic command {task} is not supported")
+        return Outcome.refused(task.lower() or "?", f"dynamic command {task} is not supported")
+
+    # -- control requests
+
+    def refuse_request(self, text: str, why: str, source: str = "") -> None:
+        """Remember a control request that could not be read (it got an error reply)."""
+        now = self._clock()
+        self._remember(Outcome.refused("?", why), when=now, via="control", source=source, text=text)
+
+    def submit(self, request: ControlRequest, reply: Reply) -> None:
+        """Take a control request (control thread): answer it now or queue it.
+
+        ``reply`` is called exactly once, from this thread or the drain thread.
+        """
+        if request.cmd in _IN_CONTROL_THREAD:
+            reply(self._record(request, self._run_here(request)))
+            return
+        with self._queue_lock:
+            if len(self._queue) < QUEUE_LIMIT:
+                self._queue.append((request, reply))
+                return
+        busy = Outcome.refused(
+            request.cmd,
+            f"the recorder is busy with {QUEUE_LIMIT} earlier commands; try again shortly",
+        )
+        reply(self._record(request, busy))
+
+    @property
+    def pending(self) -> bool:
+        """True when control commands wait for the drain thread (a cheap check)."""
+        return bool(self._queue)
+
+    def run_queued(self) -> None:
+        """Run the oldest queued control command (drain thread)."""
+        with self._queue_lock:
+            if not self._queue:
+                return
+            request, reply = self._queue.popleft()
+        try:
+            outcome = self._run_engine(request)
+        except Exception as err:  # a command must never stop the recording
+            outcome = Outcome.refused(request.cmd, f"the command failed: {err}")
+        reply(self._record(request, outcome))
+
+    def cancel_queued(self, why: str) -> None:
+        """Refuse every queued command (the recorder is stopping)."""
+        while True:
+            with self._queue_lock:
+                if not self._queue:
+                    return
+                request, reply = self._queue.popleft()
+            reply(self._record(request, Outcome.refused(request.cmd, why)))
+
+    def _record(self, request: ControlRequest, outcome: Outcome) -> Outcome:
+        if request.cmd != "status":  # the poll that reads the ring does not fill it
+            when = request.time if request.time is not None else self._clock()
+            self._remember(
+                outcome, when=when, via="control", source=request.source, text=request.text
+            )
+        return outcome
+
+    def _run_here(self, request: ControlRequest) -> Outcome:
+        cmd = request.cmd
+        if cmd == "status":
+            return Outcome.done("status", "reported the recorder's status", **self._rec.status())
+        if cmd == "ack":
+            return self._ack(request)
+        return Outcome.refused(
+            cmd, f"{cmd} is not supported yet by this recorder (it comes with recording modes)"
+        )
+
+    def _run_engine(self, request: ControlRequest) -> Outcome:
+        rec = self._rec
+        cmd, args = request.cmd, request.args
+        if cmd == "restart":
+            return rec.restart()
+        if cmd == "log_request":
+            return rec.log_request(args["spec"].replace(" ", "").replace("\t", ""))
+        if cmd == "copy_file":
+            return rec.copy_file(args["path"])
+        if cmd == "note":
+            return rec.note(args["key"], args["value"])
+        return Outcome.refused(cmd, f"{cmd} is not a recorder command")
+
+    def _ack(self, request: ControlRequest) -> Outcome:
+        session = request.args["session"]
+        files: dict[str, str] = request.args["files"]
+        if session == self._rec.current_session_name():
+            return Outcome.refused("ack", f"session {session!r} is still being recorded")
+        try:
+            append_ack(self._rec.log_root, session, files, now=self._clock(), source=request.source)
+        except StorageError as err:
+            return Outcome.refused("ack", str(err))
+        return Outcome.done("ack", f"acknowledged {len(files)} file(s) of session {session}")

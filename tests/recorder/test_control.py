@@ -1,0 +1,362 @@
+"""The one command handler and the session metadata, in the engine (fake clock, real files).
+
+The same handler serves PLOGGER_CMD, LOGGER_RESTART and the control service; each outcome
+lands in the ring the status reply lists. The metadata file follows the session: ``open``
+when it opens, rewritten while it is, ``closed`` at a clean close and never touched again.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable, Iterator
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from fleetlog.moos.alog import iter_entries
+from fleetlog.moos.mission import LoggerConfig, parse_mission
+from fleetlog.recorder.control import QUEUE_LIMIT, RING_SIZE
+from fleetlog.recorder.engine import Recorder
+from fleetlog.storage.metafile import boot_id, host_name, read_meta, recorder_alive, write_meta
+from fleetlog.wire.control import ControlRequest, Outcome, parse_control_request
+from fleetlog.wire.message import MoosMessage
+from fleetlog.wire.session_meta import ACKS_NAME, META_NAME, SessionMeta
+
+T0 = 1_800_000_000.25
+DIGEST = "ab" * 32
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.t = T0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def config(body: str) -> LoggerConfig:
+    lines = "\n".join(f"  {line.strip()}" for line in body.strip().splitlines())
+    text = f"Community = alpha\nProcessConfig = pLogger\n{{\n{lines}\n}}\n"
+    return parse_mission(text, "t.moos").logger_config("pLogger")
+
+
+class Rig:
+    def __init__(self, tmp: Path, body: str = "File = R\nPath = logs\nLog = A @ 0") -> None:
+        (tmp / "logs").mkdir(exist_ok=True)
+        (tmp / "mission").mkdir(exist_ok=True)
+        self.clock = Clock()
+        self.posted: list[MoosMessage] = []
+        self.rec = Recorder(
+            config(body),
+            vehicle="alpha",
+            publish=self.posted.append,
+            cwd=tmp,
+            copy_dirs=[tmp / "mission"],
+            clock=self.clock,
+            recorder_id="zid-1",
+        )
+
+    def send(self, name: str, value: float | str | bytes, at: float, source: str = "iOps") -> None:
+        self.clock.t = T0 + at
+        self.rec.handle(MoosMessage(name, value, self.clock.t, source, "", "alpha"))
+
+    @property
+    def dir(self) -> Path:
+        assert self.rec.session is not None
+        return self.rec.session.dir_path
+
+    def meta(self, directory: Path | None = None) -> SessionMeta:
+        found = read_meta(directory or self.dir)
+        assert found is not None
+        return found
+
+    def debugs(self) -> list[str]:
+        texts = [str(m.value) for m in self.posted if m.name == "MOOS_DEBUG"]
+        self.posted.clear()
+        return texts
+
+    def close(self) -> None:
+        self.rec.stop()
+
+    def control(self, obj: dict[str, object]) -> Outcome:
+        """Submit a control request and run it as the drain thread would."""
+        got: list[Outcome] = []
+        self.rec.commands.submit(parse_control_request(json.dumps(obj).encode(), ""), got.append)
+        self.rec.commands.run_queued()
+        (outcome,) = got
+        return outcome
+
+
+@pytest.fixture
+def rigs(tmp_path: Path) -> Iterator[Callable[..., Rig]]:
+    """Make rigs in ``tmp_path``; every recorder is stopped at the end."""
+    made: list[Rig] = []
+
+    def make(body: str = "File = R\nPath = logs\nLog = A @ 0") -> Rig:
+        rig = Rig(tmp_path, body)
+        made.append(rig)
+        return rig
+
+    yield make
+    for rig in made:
+        rig.close()
+
+
+def test_moos_commands_keep_their_debug_text_and_land_in_the_ring(
+    tmp_path: Path, rigs: Callable[..., Rig]
+) -> None:
+    rig = rigs()
+    rig.rec.start()
+    (tmp_path / "mission" / "a.txt").write_text("hi")
+    rig.debugs()
+    rig.send("PLOGGER_CMD", "LOG_REQUEST = B @ 0", at=1.0)
+    rig.send("PLOGGER_CMD", "LOG_REQUEST = B @ 0", at=1.5)
+    rig.send("PLOGGER_CMD", "COPY_FILE_REQUEST = /etc/hostname", at=2.0)
+    rig.send("PLOGGER_CMD", "COPY_FILE_REQUEST = mission/a.txt", at=2.5)
+    rig.send("PLOGGER_CMD", 3.0, at=3.0)
+    rig.send("PLOGGER_CMD", "FROB = 1", at=3.5)
+    assert rig.debugs() == [
+        "failed to process dynamic log request  - see pLogger output\n",
+        "refused COPY_FILE_REQUEST for /etc/hostname: outside the directories the recorder "
+        "may copy from",
+        "PLOGGER_CMD must be a string, got a double: ignored",
+        "Dynamic command FROB is not supported",
+    ]
+    rig.send("LOGGER_RESTART", "true", at=4.0)
+    ring = rig.rec.status()["commands"]
+    assert [(r["via"], r["cmd"], r["ok"]) for r in ring] == [
+        ("PLOGGER_CMD", "log_request", True),
+        ("PLOGGER_CMD", "log_request", False),
+        ("PLOGGER_CMD", "copy_file", False),
+        ("PLOGGER_CMD", "copy_file", True),
+        ("PLOGGER_CMD", "?", False),
+        ("PLOGGER_CMD", "frob", False),
+        ("LOGGER_RESTART", "restart", True),
+    ]
+    assert ring[0] == {
+        "time": T0 + 1.0,
+        "via": "PLOGGER_CMD",
+        "source": "iOps",
+        "cmd": "log_request",
+        "text": "LOG_REQUEST = B @ 0",
+        "ok": True,
+        "did": "now logging B",
+        "why": None,
+    }
+    assert ring[1]["why"] == "B is logged already"
+    assert ring[3]["did"] == "copied mission/a.txt to a._txt"
+    assert ring[4]["text"] == "3.0"
+    assert ring[6]["did"] == f"started session {rig.rec.session.root}"  # type: ignore[union-attr]
+    stats = rig.rec.stats
+    assert (stats.commands, stats.refused_commands) == (7, 4)
+
+
+def test_the_ring_keeps_the_last_64(tmp_path: Path, rigs: Callable[..., Rig]) -> None:
+    rig = rigs()
+    rig.rec.start()
+    for i in range(RING_SIZE + 10):
+        rig.send("PLOGGER_CMD", f"X{i} = 1", at=1.0)
+    ring = rig.rec.status()["commands"]
+    assert len(ring) == RING_SIZE
+    assert ring[0]["cmd"] == "x10"
+    assert ring[-1]["cmd"] == f"x{RING_SIZE + 9}"
+
+
+def test_control_requests_go_through_the_same_handler(
+    tmp_path: Path, rigs: Callable[..., Rig]
+) -> None:
+    rig = rigs()
+    rig.rec.start()
+    (tmp_path / "mission" / "notes.txt").write_text("n")
+    rig.debugs()
+    first = rig.rec.session
+    assert rig.control({"cmd": "log_request", "spec": "NAV_X @ 0", "source": "ops"}).ok
+    again = rig.control({"cmd": "log_request", "spec": "NAV_X @ 0"})
+    assert (again.ok, again.why) == (False, "NAV_X is logged already")
+    # the same MOOS_DEBUG as the PLOGGER_CMD path
+    assert rig.debugs() == ["failed to process dynamic log request  - see pLogger output\n"]
+    copied = rig.control({"cmd": "copy_file", "path": "mission/notes.txt"})
+    assert (copied.ok, copied.did) == (True, "copied mission/notes.txt to notes._txt")
+    assert (rig.dir / "notes._txt").read_text() == "n"
+    noted = rig.control({"cmd": "note", "key": "site", "value": "bay"})
+    assert noted.ok
+    assert rig.meta().notes == {"site": "bay"}
+    for cmd in ("pause", "resume", "split", "snapshot"):
+        out = rig.control({"cmd": cmd})
+        assert not out.ok
+        assert out.why is not None
+        assert "not supported yet" in out.why
+    status = rig.control({"cmd": "status"})
+    assert status.ok
+    assert status.extra["vehicle"] == "alpha"
+    restarted = rig.control({"cmd": "restart", "time": 12.0})
+    assert restarted.ok
+    assert rig.rec.session is not first
+    assert restarted.extra["session"] == rig.rec.session.root  # type: ignore[union-attr]
+    ring = rig.rec.status()["commands"]
+    # status polls do not fill the ring; the request's own time is kept
+    assert [r["cmd"] for r in ring] == [
+        "log_request",
+        "log_request",
+        "copy_file",
+        "note",
+        "pause",
+        "resume",
+        "split",
+        "snapshot",
+        "restart",
+    ]
+    assert ring[0]["source"] == "ops"
+    assert ring[-1]["time"] == 12.0
+    assert json.loads(ring[-1]["text"]) == {"cmd": "restart", "time": 12.0}
+
+
+def test_malformed_requests_are_counted_and_a_full_queue_refuses_at_once(
+    tmp_path: Path, rigs: Callable[..., Rig]
+) -> None:
+    rig = rigs()
+    rig.rec.start()
+    rig.rec.commands.refuse_request('{"cmd": 1}', "the request names no command ('cmd')")
+    got: list[Outcome] = []
+    for _ in range(QUEUE_LIMIT + 3):
+        rig.rec.commands.submit(ControlRequest("note", {"key": "k", "value": "v"}), got.append)
+    # the first QUEUE_LIMIT wait for the drain thread; the others are refused now
+    assert [o.ok for o in got] == [False] * 3
+    assert got[0].why is not None
+    assert "busy" in got[0].why
+    while rig.rec.commands.pending:
+        rig.rec.commands.run_queued()
+    assert [o.ok for o in got[3:]] == [True] * QUEUE_LIMIT
+    stats = rig.rec.stats
+    assert (stats.commands, stats.refused_commands) == (QUEUE_LIMIT + 4, 4)
+
+
+def test_metadata_follows_the_session_and_never_changes_once_closed(
+    tmp_path: Path, rigs: Callable[..., Rig]
+) -> None:
+    rig = rigs()
+    rig.rec.start()
+    first = rig.dir
+    meta = rig.meta()
+    assert (meta.state, meta.vehicle, meta.session, meta.recorder) == (
+        "open",
+        "alpha",
+        first.name,
+        "zid-1",
+    )
+    assert (meta.opened, meta.logstart, meta.closed, meta.part) == (T0, T0, None, 1)
+    assert (meta.host, meta.pid, meta.boot) == (host_name(), os.getpid(), boot_id())
+    assert len(meta.mission_id) == 32
+    for i in range(5):
+        rig.send("A", float(i), at=0.5)
+    rig.clock.t = T0 + 2.5
+    rig.rec.tick()  # counters changed: rewritten
+    assert rig.meta().counters["logged"] == 5
+    assert rig.meta().updated == T0 + 2.5
+    rig.send("LOGGER_RESTART", "now", at=3.0)
+    closed = rig.meta(first)
+    assert (closed.state, closed.closed) == ("closed", T0 + 3.0)
+    assert closed.counters["logged"] == 5
+    assert closed.counters["received"] == 6  # the restart itself came in this session
+    frozen = (first / META_NAME).read_bytes()
+    second = rig.dir
+    assert rig.meta().state == "open"
+    assert rig.meta().mission_id != closed.mission_id
+    rig.send("A", 9.0, at=4.0)
+    rig.clock.t = T0 + 9.0
+    rig.rec.tick()
+    rig.rec.stop()
+    assert rig.meta(second).state == "closed"
+    assert rig.meta(second).counters["logged"] == 1
+    assert (first / META_NAME).read_bytes() == frozen
+    assert sorted(p.name for p in first.iterdir() if p.name.startswith(".")) == [META_NAME]
+
+
+def test_a_session_left_open_by_a_dead_recorder_is_cut_and_marked_in_the_next(
+    tmp_path: Path, rigs: Callable[..., Rig]
+) -> None:
+    rig = rigs()
+    dead = tmp_path / "logs" / "R_OLD"
+    dead.mkdir(parents=True)
+    (dead / "R_OLD.alog").write_text("")
+    crashed = SessionMeta(
+        state="open",
+        vehicle="alpha",
+        session="R_OLD",
+        recorder="zid-0",
+        fleetlog="0",
+        opened=T0 - 100,
+        logstart=T0 - 100,
+        updated=T0 - 50,
+        host=host_name(),
+        pid=os.getpid(),
+        boot=boot_id(),
+    )
+    write_meta(dead, crashed)  # nobody holds its lock: its recorder died
+    rig.rec.start()
+    cut = rig.meta(dead)
+    assert (cut.state, cut.closed) == ("cut", T0)
+    # ``updated`` stays the last sign of life of its own recorder
+    assert cut == replace(crashed, state="cut", closed=T0)
+    rig.rec.stop()
+    assert (dead / "R_OLD.alog").read_text() == ""  # only its metadata is touched
+    new = [d for d in (tmp_path / "logs").iterdir() if d.name != "R_OLD"]
+    (session,) = new
+    with open(session / f"{session.name}.alog", encoding="utf-8") as f:
+        first = next(iter_entries(f))
+    assert (first.key, first.source) == ("PLOGGER_GAP", "pLogger")
+    assert first.value == f"reason=crash,lost=?,from={T0 - 50:.3f},to={T0:.3f},session=R_OLD"
+    assert rig.meta(session).gaps[0].reason == "crash"
+
+
+def test_ack_checks_the_session_and_appends_a_line(
+    tmp_path: Path, rigs: Callable[..., Rig]
+) -> None:
+    rig = rigs()
+    rig.rec.start()
+    first = rig.dir
+    rig.send("LOGGER_RESTART", "now", at=1.0)
+    alog = f"{first.name}.alog"
+    ok = rig.control({"cmd": "ack", "session": first.name, "files": {alog: DIGEST}})
+    assert ok.ok, ok.why
+    current = rig.control({"cmd": "ack", "session": rig.dir.name, "files": {alog: DIGEST}})
+    assert current.why == f"session {rig.dir.name!r} is still being recorded"
+    missing = rig.control({"cmd": "ack", "session": first.name, "files": {"x.alog": DIGEST}})
+    assert missing.why == f"session {first.name!r} has no file 'x.alog'"
+    lines = (tmp_path / "logs" / ACKS_NAME).read_text().splitlines()
+    assert len(lines) == 1
+    assert json.loads(lines[0])["files"] == {alog: DIGEST}
+
+
+def test_notes_are_bounded(tmp_path: Path, rigs: Callable[..., Rig]) -> None:
+    rig = rigs()
+    rig.rec.start()
+    for i in range(64):
+        assert rig.control({"cmd": "note", "key": f"k{i}", "value": "v"}).ok
+    assert rig.control({"cmd": "note", "key": "k0", "value": "changed"}).ok
+    refused = rig.control({"cmd": "note", "key": "one-more", "value": "v"})
+    assert refused.why == "a session holds at most 64 notes"
+    assert rig.control({"cmd": "note", "key": "\x01", "value": "v"}).why is not None
+    assert rig.meta().notes["k0"] == "changed"
+    assert len(rig.meta().notes) == 64
+
+
+@pytest.mark.parametrize("timestamp", [True, False])
+def test_the_directory_is_locked_while_open_and_released_after_close(
+    rigs: Callable[..., Rig], timestamp: bool
+) -> None:
+    stamp = "true" if timestamp else "false"
+    rig = rigs(f"File = R\nPath = logs\nFileTimeStamp = {stamp}\nLog = A @ 0")
+    rig.rec.start()
+    first = rig.dir
+    assert recorder_alive(first)
+    rig.send("LOGGER_RESTART", "now", at=1.0)  # FileTimeStamp = false reuses the directory
+    assert recorder_alive(rig.dir)
+    if timestamp:
+        assert not recorder_alive(first)
+    last = rig.dir
+    rig.rec.stop()
+    assert not recorder_alive(last)
+    assert rig.meta(last).state == "closed"
