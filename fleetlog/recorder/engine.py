@@ -242,6 +242,8 @@ class Recorder:
         for cut in self.cut_sessions:
             # A crash's gap is the first entry of the next session.
             self.gap(Gap(self._clock(), "crash", None, cut.updated, self.logstart, {}, cut.session))
+        if self.cut_sessions:
+            self.flush()  # the mark reaches the OS now, not with the first sample
         return session
 
     def _open_session(self, path: str | None = None) -> SessionWriter:
