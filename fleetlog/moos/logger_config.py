@@ -30,6 +30,9 @@ __all__ = [
     "ALWAYS_LOGGED",
     "ALWAYS_OMITTED",
     "DEFAULT_LOG_PERIOD",
+    "MAX_DOUBLE_PRECISION",
+    "MAX_DYNAMIC_COLUMNS",
+    "MAX_FILE_BYTES",
     "MIN_SYNC_PERIOD",
     "CompressMode",
     "LogSpec",
@@ -47,6 +50,18 @@ DEFAULT_LOG_PERIOD = 2.0
 MIN_SYNC_PERIOD = 0.1
 #: Variables wildcard logging never takes (§6.4).
 ALWAYS_OMITTED = ("MISSION_FILE",)
+
+#: the most decimals ``DoublePrecision`` may ask for: a double has 17 significant digits, and
+#: 30 decimals still show 1e-13 to 17 digits while keeping every line short
+MAX_DOUBLE_PRECISION = 30
+#: the most ``DYNAMIC_`` columns a mission may reserve (each one is a column of every row)
+MAX_DYNAMIC_COLUMNS = 1000
+#: the longest ``File``: the session's name adds a time stamp (24 bytes), a ``-N`` suffix and
+#: an extension (``.alog.zst``) and must stay one file name (255 bytes)
+MAX_FILE_BYTES = 200
+#: one component of a path, and a whole path, as Linux allows them
+MAX_NAME_BYTES = 255
+MAX_PATH_BYTES = 4095
 
 #: How alogs are compressed: ``CompressAlogs = true`` → zstd, ``= gzip`` → gzip (§12).
 CompressMode = Literal["none", "zstd", "gzip"]
@@ -101,12 +116,17 @@ def parse_log_spec(text: str, *, lineno: int | None = None, path: str | None = N
         The parsed entry.
 
     Raises:
-        MissionError: no variable name, or a negative or non-finite period.
+        MissionError: no variable name, a name with unprintable characters (a byte that is
+            not UTF-8 is fine), or a negative or non-finite period.
     """
     squeezed = text.translate(_SQUEEZE_ALL)
     var, at, rest = squeezed.partition("@")
     if not var:
         msg = f"log entry {text.strip()!r} names no variable before '@'"
+        raise MissionError(msg, path, lineno)
+    if not var.isprintable() and not all(c.isprintable() or "\udc80" <= c <= "\udcff" for c in var):
+        # A control character or a line separator would break the slog's columns and lines.
+        msg = f"log entry {text.strip()!r} names a variable holding unprintable characters"
         raise MissionError(msg, path, lineno)
     period = DEFAULT_LOG_PERIOD
     head = rest.partition(",")[0]
@@ -234,7 +254,7 @@ class _Reader:
         param = self.param(name)
         return default if param is None else _moos_bool(param.value)
 
-    def integer(self, name: str, default: int) -> int:
+    def integer(self, name: str, default: int, high: int) -> int:
         param = self.param(name)
         if param is None:
             return default
@@ -245,7 +265,18 @@ class _Reader:
         if value < 0:
             msg = f"{param.name} value {param.value!r} is negative"
             raise MissionError(msg, self.path, param.lineno)
+        if value > high:
+            msg = f"{param.name} value {param.value!r} is too large: at most {high}"
+            raise MissionError(msg, self.path, param.lineno)
         return value
+
+    def file_name(self, name: str, default: str, *, stem: bool = False) -> str:
+        """A setting that names a file or a directory (``stem``: ``File``)."""
+        param = self.param(name)
+        if param is None:
+            return default
+        check_path(param, self.path, stem=stem)
+        return param.value
 
     def raw_list(self, name: str) -> tuple[str, ...]:
         if self.block is None:
@@ -254,6 +285,41 @@ class _Reader:
         for param in self.block.raw_values(name):
             items.extend(item for item in param.value.split(",") if item)
         return tuple(items)
+
+
+def check_path(param: Param, path: str, *, stem: bool = False) -> None:
+    """Refuse a path no filesystem could take.
+
+    Args:
+        param: the setting.
+        path: the mission file, for the message.
+        stem: the value is ``File``, whose last component gets a time stamp and an extension
+            (so at most :data:`MAX_FILE_BYTES`).
+
+    Raises:
+        MissionError: the value is not UTF-8 text, a component is longer than 255 bytes (the
+            last one of a ``stem`` longer than :data:`MAX_FILE_BYTES`), or the whole is longer
+            than 4095.
+    """
+    value = param.value
+    try:
+        raw = value.encode("utf-8")
+    except UnicodeEncodeError:
+        msg = f"{param.name} value {value!r} is not UTF-8 text"
+        raise MissionError(msg, path, param.lineno) from None
+    if len(raw) > MAX_PATH_BYTES:
+        msg = f"{param.name} value is {len(raw)} bytes long: at most {MAX_PATH_BYTES}"
+        raise MissionError(msg, path, param.lineno)
+    parts = raw.split(b"/")
+    for index, part in enumerate(parts):
+        limit = MAX_FILE_BYTES if stem and index == len(parts) - 1 else MAX_NAME_BYTES
+        if len(part) > limit:
+            shown = part[:24].decode() + "…"
+            msg = (
+                f"{param.name} value has a component of {len(part)} bytes ({shown!r}): "
+                f"at most {limit}"
+            )
+            raise MissionError(msg, path, param.lineno)
 
 
 def _sync_log(reader: _Reader) -> tuple[bool, float]:
@@ -267,6 +333,9 @@ def _sync_log(reader: _Reader) -> tuple[bool, float]:
             msg = f"{param.name} period {rest!r} is not a number"
             raise MissionError(msg, reader.path, param.lineno)
         period = max(float(rest), MIN_SYNC_PERIOD)
+        if not math.isfinite(period):
+            msg = f"{param.name} period {rest!r} is not a finite number"
+            raise MissionError(msg, reader.path, param.lineno)
     return _key(word) == "TRUE", period
 
 
@@ -314,6 +383,9 @@ def _time_warp(mission: Mission) -> float:
         msg = f"{param.name} value {param.value!r} is not a number"
         raise MissionError(msg, mission.path, param.lineno)
     warp = float(param.value)
+    if not math.isfinite(warp):
+        msg = f"{param.name} value {param.value!r} is not a finite number"
+        raise MissionError(msg, mission.path, param.lineno)
     if warp <= 0:
         msg = f"{param.name} value {param.value!r} is not greater than 0"
         raise MissionError(msg, mission.path, param.lineno)
@@ -323,8 +395,9 @@ def _time_warp(mission: Mission) -> float:
 def _helm_task_file(mission: Mission) -> str | None:
     for app in ("pHelm", "pHelmIvP"):
         block = mission.block(app)
-        if block is not None and (task_file := block.get("TaskFile")) is not None:
-            return task_file
+        if block is not None and (param := block.param("TaskFile")) is not None:
+            check_path(param, mission.path)
+            return param.value
     return None
 
 
@@ -333,46 +406,51 @@ def logger_config(mission: Mission, app_name: str = "pLogger") -> LoggerConfig:
     block = mission.block(app_name)
     reader = _Reader(block, mission.path)
 
-    path = mission.global_value("GlobalLogPath") or reader.string("Path", "./")
+    global_path = mission.global_param("GlobalLogPath")
+    if global_path is not None and global_path.value:
+        check_path(global_path, mission.path)
+        path = global_path.value
+    else:
+        path = reader.file_name("Path", "./")
     if path.endswith("/"):
         path = path[:-1]
 
     sync_log, sync_period = _sync_log(reader)
     wildcard = reader.boolean("WildcardLogging", False) if block is not None else True
-    copy_dirs = tuple(
-        item.strip(_TRIM)
-        for param in (block.params if block is not None else ())
-        if _key(param.name) == "COPYFILEDIRS"
-        for item in param.value.split(",")
-        if item.strip(_TRIM)
-    )
+    copy_dirs: list[str] = []
+    for param in block.params if block is not None else ():
+        if _key(param.name) == "COPYFILEDIRS":
+            check_path(param, mission.path)
+            copy_dirs.extend(
+                item.strip(_TRIM) for item in param.value.split(",") if item.strip(_TRIM)
+            )
 
     return LoggerConfig(
         app_name=app_name,
-        file=reader.string("File", "MOOSLog"),
+        file=reader.file_name("File", "MOOSLog", stem=True),
         path=path,
         file_timestamp=reader.boolean("FileTimeStamp", True),
         utc_log_directories=reader.boolean("UTCLogDirectories", False),
         async_log=wildcard or reader.boolean("AsyncLog", True),
         sync_log=sync_log,
         sync_period=sync_period,
-        double_precision=reader.integer("DoublePrecision", 5),
+        double_precision=reader.integer("DoublePrecision", 5, MAX_DOUBLE_PRECISION),
         log_aux_src=reader.boolean("LogAuxSrc", False),
         mark_external_community_messages=reader.boolean("MarkExternalCommunityMessages", False),
         mark_data_type=reader.boolean("MarkDataType", False),
         compress_alogs=_compress_mode(reader),
-        dynamic_sync_log_columns=reader.integer("DynamicSyncLogColumns", 0),
+        dynamic_sync_log_columns=reader.integer("DynamicSyncLogColumns", 0, MAX_DYNAMIC_COLUMNS),
         wildcard_logging=wildcard,
         wildcard_patterns=reader.raw_list("WildcardPattern"),
         wildcard_omit_patterns=ALWAYS_OMITTED + reader.raw_list("WildcardOmitPattern"),
         wildcard_exclusion_log=reader.boolean("WildcardExclusionLog", False),
-        logging_directory_summary_file=reader.string(
+        logging_directory_summary_file=reader.file_name(
             "LoggingDirectorySummaryFile", ".LastOpenedMOOSLogDirectory"
         ),
         log_specs=_log_specs(reader),
         community=mission.community,
         helm_task_file=_helm_task_file(mission),
         variant=_variant(reader),
-        copy_file_dirs=copy_dirs,
+        copy_file_dirs=tuple(copy_dirs),
         moos_time_warp=_time_warp(mission),
     )

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 import zenoh
-from helpers import Proc
+from helpers import Proc, run_cli
 
 from fleetlog.moos.alog import Entry, iter_entries, split_source
 from fleetlog.transport.session import SessionOptions, open_session
@@ -156,3 +156,23 @@ def test_forged_fields_never_write_a_line_that_reads_back_differently(
         assert src
         assert " " not in entry.source
         assert "\n" not in entry.source
+
+
+@pytest.mark.parametrize(
+    ("setting", "message"),
+    [
+        (b"Path = " + b"p" * 300, "bad.moos:3: Path value has a component of 300 bytes"),
+        (b"File = caf\xe9", "bad.moos:3: File value 'caf\\udce9' is not UTF-8 text"),
+        (b"DoublePrecision = 99999999999", "bad.moos:3: DoublePrecision value '99999999999'"),
+        (b"SyncLog = true\n DynamicSyncLogColumns = 99999999999", "bad.moos:4: DynamicSync"),
+    ],
+)
+def test_bad_mission_is_one_line_before_anything_starts(
+    tmp_path: Path, cli_env: dict[str, str], setting: bytes, message: str
+) -> None:
+    (tmp_path / "bad.moos").write_bytes(b"ProcessConfig = pLogger\n{\n " + setting + b"\n}\n")
+    done = run_cli("record", "bad.moos", "--no-multicast-scouting", cwd=tmp_path, env=cli_env)
+    assert done.returncode == 1
+    assert done.stderr.startswith(f"fleetlog: error: {message}")
+    assert done.stderr.count("\n") == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.moos"]
