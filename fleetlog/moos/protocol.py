@@ -1,0 +1,530 @@
+"""The MOOS V10 wire protocol: messages, packets, framing and the handshake (MOOS_WIRE.md).
+
+Pure code: bytes in, messages out, and back. The socket I/O lives in
+:mod:`fleetlog.transport.moos_client`.
+
+* A **message** (``CMOOSMsg``) is: int32 total length (these 4 bytes included), int32 id,
+  one byte message type, one byte data type, four strings (source, aux source, originating
+  community, key), three float64 (time, double value, second double) and a last string (the
+  string or binary value). A string is an int32 byte count and the raw bytes: no terminator,
+  no encoding. Everything is little-endian.
+* A **packet** (``CMOOSCommPkt``) is: int32 total length (its 9-byte header included), int32
+  message count, one "compressed" byte (always written 0, ignored on read), then the
+  messages back to back.
+* The **handshake**: the client sends the 32-byte :data:`HANDSHAKE` text, then a packet with
+  one ``i`` message whose key is ``asynchronous`` and whose string is the client's name; the
+  DB answers a packet with a ``W`` (welcome) or ``K`` (poison) message.
+
+Text fields (source, aux, community, key) are decoded as UTF-8 with ``surrogateescape``, so
+any bytes survive a decode and re-encode unchanged; the value string stays ``bytes``. The
+decoder is strict: a length that does not add up, a negative count, a packet larger than the
+reader's limit or bytes left over raise :class:`~fleetlog.errors.FormatError` with the reason.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import NamedTuple
+
+from fleetlog.errors import FormatError
+
+__all__ = [
+    "ASYNC_KEY",
+    "DEFAULT_MAX_PACKET",
+    "HANDSHAKE",
+    "MESSAGE_OVERHEAD",
+    "PACKET_HEADER",
+    "DataType",
+    "Message",
+    "MsgType",
+    "PacketReader",
+    "Welcome",
+    "decode_message",
+    "decode_packet",
+    "decode_stream",
+    "encode_message",
+    "encode_packet",
+    "handshake_message",
+    "notify",
+    "parse_welcome",
+    "register",
+    "timing_message",
+    "unregister",
+    "wildcard_register",
+]
+
+#: What a client sends first: the protocol's 23-character magic, NUL-padded to 32 bytes.
+HANDSHAKE = b"ELKS CAN'T DANCE 2/8/10".ljust(32, b"\0")
+#: The key of the handshake message of an asynchronous (full-duplex) client.
+ASYNC_KEY = "asynchronous"
+#: Bytes of a message with empty strings: 2 int32, 2 chars, 5 string lengths, 3 float64.
+MESSAGE_OVERHEAD = 54
+#: Bytes of a packet header: int32 length, int32 count, one flag byte.
+PACKET_HEADER = 9
+#: Default largest packet a reader accepts (MOOS itself has no limit; a camera image is a few
+#: MiB, and a corrupt or hostile length must not make the reader allocate gigabytes).
+DEFAULT_MAX_PACKET = 64 * 1024 * 1024
+
+
+class MsgType:
+    """Message types (``m_cMsgType``, ``MOOSMsg.h``)."""
+
+    NOTIFY = "N"
+    REGISTER = "R"
+    UNREGISTER = "U"
+    WILDCARD_REGISTER = "*"
+    WILDCARD_UNREGISTER = "/"
+    NOT_SET = "~"
+    COMMAND = "C"
+    ANONYMOUS = "A"
+    NULL = "."
+    DATA = "i"
+    POISON = "K"
+    WELCOME = "W"
+    SERVER_REQUEST = "Q"
+    TIMING = "T"
+    TERMINATE = "^"
+
+
+class DataType:
+    """Data types (``m_cDataType``)."""
+
+    DOUBLE = "D"
+    STRING = "S"
+    BINARY = "B"
+
+
+class Message(NamedTuple):
+    """One ``CMOOSMsg``, every field as it travels.
+
+    Attributes:
+        msg_type: one character, see :class:`MsgType`.
+        data_type: one character, see :class:`DataType`.
+        key: the variable name (or, for control messages, what they are about).
+        time: ``m_dfTime``, seconds since the epoch.
+        double: ``m_dfVal`` (-1 when unused).
+        string: ``m_sVal`` as raw bytes: the string or binary value.
+        source: ``m_sSrc``, the publishing process.
+        aux: ``m_sSrcAux``, the auxiliary source.
+        community: ``m_sOriginatingCommunity``.
+        double2: ``m_dfVal2`` (-1 when unused; the DB's pacing period in timing replies).
+        id: ``m_nID``.
+    """
+
+    msg_type: str
+    data_type: str
+    key: str
+    time: float
+    double: float = -1.0
+    string: bytes = b""
+    source: str = ""
+    aux: str = ""
+    community: str = ""
+    double2: float = -1.0
+    id: int = -1
+
+    @property
+    def value(self) -> float | str | bytes:
+        """The value as fleetlog carries it: float, str (surrogate-escaped) or bytes."""
+        if self.data_type == DataType.DOUBLE:
+            return self.double
+        if self.data_type == DataType.BINARY:
+            return self.string
+        return self.string.decode("utf-8", "surrogateescape")
+
+    def size(self) -> int:
+        """Return the message's length on the wire."""
+        return (
+            MESSAGE_OVERHEAD
+            + len(_text(self.source))
+            + len(_text(self.aux))
+            + len(_text(self.community))
+            + len(_text(self.key))
+            + len(self.string)
+        )
+
+
+_new_message = Message.__new__
+_I32 = struct.Struct("<i")
+_HEAD = struct.Struct("<iiBBi")  # length, id, type, data type, source length
+_TAIL = struct.Struct("<dddi")  # time, double, double2, string length
+_PACKET = struct.Struct("<iiB")
+_CHR = [chr(i) for i in range(256)]
+_unpack_i32 = _I32.unpack_from
+_unpack_head = _HEAD.unpack_from
+_unpack_tail = _TAIL.unpack_from
+
+
+def _text(text: str) -> bytes:
+    return text.encode("utf-8", "surrogateescape")
+
+
+def _type_byte(char: str, what: str) -> int:
+    raw = char.encode("latin-1", "replace") if char else b""
+    if len(raw) != 1:
+        msg = f"a message's {what} must be one character, not {char!r}"
+        raise ValueError(msg)
+    return raw[0]
+
+
+def encode_message(message: Message) -> bytes:
+    """Serialize one message as ``CMOOSMsg::Serialize`` does.
+
+    Raises:
+        ValueError: the message or data type is not one character.
+    """
+    source = _text(message.source)
+    aux = _text(message.aux)
+    community = _text(message.community)
+    key = _text(message.key)
+    value = message.string
+    length = MESSAGE_OVERHEAD + len(source) + len(aux) + len(community) + len(key) + len(value)
+    return b"".join(
+        (
+            _HEAD.pack(
+                length,
+                message.id,
+                _type_byte(message.msg_type, "type"),
+                _type_byte(message.data_type, "data type"),
+                len(source),
+            ),
+            source,
+            _I32.pack(len(aux)),
+            aux,
+            _I32.pack(len(community)),
+            community,
+            _I32.pack(len(key)),
+            key,
+            _TAIL.pack(message.time, message.double, message.double2, len(value)),
+            value,
+        )
+    )
+
+
+def encode_packet(messages: Iterable[Message]) -> bytes:
+    """Serialize messages into one packet (``CMOOSCommPkt``).
+
+    Raises:
+        ValueError: a message's type or data type is not one character.
+    """
+    body = [encode_message(m) for m in messages]
+    size = PACKET_HEADER + sum(len(b) for b in body)
+    return _PACKET.pack(size, len(body), 0) + b"".join(body)
+
+
+def _string(data: bytes | memoryview, pos: int, end: int, what: str) -> tuple[bytes, int]:
+    if pos + 4 > end:
+        msg = f"message ends inside the length of its {what}"
+        raise FormatError(msg)
+    (n,) = _unpack_i32(data, pos)
+    pos += 4
+    if n < 0 or pos + n > end:
+        msg = f"message's {what} claims {n} bytes, {end - pos} are left"
+        raise FormatError(msg)
+    return bytes(data[pos : pos + n]), pos + n
+
+
+def decode_message(data: bytes | memoryview, pos: int = 0, end: int | None = None) -> Message:
+    """Decode the message at ``pos``; it must end exactly where its length says.
+
+    Args:
+        data: the bytes holding it.
+        pos: where it starts.
+        end: where the enclosing packet ends (the end of ``data`` by default).
+
+    Raises:
+        FormatError: the bytes are not one whole message.
+    """
+    limit = len(data) if end is None else end
+    if pos + 14 > limit:
+        msg = f"message header needs 14 bytes, {limit - pos} are left"
+        raise FormatError(msg)
+    length, ident, mtype, dtype, nsrc = _unpack_head(data, pos)
+    if length < MESSAGE_OVERHEAD or pos + length > limit:
+        msg = f"message length {length} does not fit: {limit - pos} bytes are left"
+        raise FormatError(msg)
+    stop = pos + length
+    p = pos + 14
+    if nsrc < 0 or p + nsrc > stop:
+        msg = f"message's source claims {nsrc} bytes, {stop - p} are left"
+        raise FormatError(msg)
+    source = bytes(data[p : p + nsrc])
+    p += nsrc
+    aux, p = _string(data, p, stop, "aux source")
+    community, p = _string(data, p, stop, "community")
+    key, p = _string(data, p, stop, "key")
+    if p + 28 > stop:
+        msg = "message ends inside its time and values"
+        raise FormatError(msg)
+    when, double, double2, nval = _unpack_tail(data, p)
+    p += 28
+    if nval < 0 or p + nval != stop:
+        msg = f"message's value claims {nval} bytes, {stop - p} are left"
+        raise FormatError(msg)
+    return _new_message(
+        Message,
+        _CHR[mtype],
+        _CHR[dtype],
+        key.decode("utf-8", "surrogateescape"),
+        when,
+        double,
+        bytes(data[p:stop]),
+        source.decode("utf-8", "surrogateescape"),
+        aux.decode("utf-8", "surrogateescape"),
+        community.decode("utf-8", "surrogateescape"),
+        double2,
+        ident,
+    )
+
+
+def _decode_body(data: bytes | memoryview, start: int, end: int, count: int) -> list[Message]:
+    messages: list[Message] = []
+    pos = start
+    for index in range(count):
+        if pos + 4 > end:
+            msg = f"packet announces {count} messages but ends after {index}"
+            raise FormatError(msg)
+        message = decode_message(data, pos, end)
+        pos += _unpack_i32(data, pos)[0]
+        messages.append(message)
+    if pos != end:
+        msg = f"packet has {end - pos} bytes after its {count} messages"
+        raise FormatError(msg)
+    return messages
+
+
+def decode_packet(data: bytes | memoryview, max_size: int = DEFAULT_MAX_PACKET) -> list[Message]:
+    """Decode exactly one packet.
+
+    Raises:
+        FormatError: ``data`` is not exactly one well-formed packet, or it is larger than
+            ``max_size``.
+    """
+    if len(data) < PACKET_HEADER:
+        msg = f"packet header needs {PACKET_HEADER} bytes, got {len(data)}"
+        raise FormatError(msg)
+    size, count, _flag = _PACKET.unpack_from(data, 0)
+    _check_header(size, count, max_size)
+    if size != len(data):
+        msg = f"packet length says {size} bytes, got {len(data)}"
+        raise FormatError(msg)
+    return _decode_body(data, PACKET_HEADER, size, count)
+
+
+def _check_header(size: int, count: int, max_size: int) -> None:
+    if size < PACKET_HEADER:
+        msg = f"packet length {size} is shorter than its header"
+        raise FormatError(msg)
+    if size > max_size:
+        msg = f"packet of {size} bytes is larger than the limit of {max_size}"
+        raise FormatError(msg)
+    if count < 0 or count * MESSAGE_OVERHEAD > size - PACKET_HEADER:
+        msg = f"packet of {size} bytes cannot hold {count} messages"
+        raise FormatError(msg)
+
+
+class PacketReader:
+    """Cuts a byte stream into packets and decodes them (the receive side's framing).
+
+    Feed it whatever the socket delivers; it returns the messages of every packet completed.
+    A packet larger than ``max_size`` is not buffered: its bytes are skipped as they arrive
+    (the stream stays in step) and counted in :attr:`oversized`. Any other malformed packet
+    raises :class:`FormatError`, after which the stream cannot be trusted.
+
+    Args:
+        max_size: the largest packet accepted, in bytes.
+    """
+
+    __slots__ = ("_buffer", "_skip", "max_size", "oversized", "oversized_messages")
+
+    def __init__(self, max_size: int = DEFAULT_MAX_PACKET) -> None:
+        self.max_size = max_size
+        self._buffer = bytearray()
+        self._skip = 0
+        #: packets skipped because they were larger than ``max_size``
+        self.oversized = 0
+        #: messages those packets announced
+        self.oversized_messages = 0
+
+    @property
+    def pending(self) -> int:
+        """Bytes held of a packet not yet complete."""
+        return len(self._buffer)
+
+    def feed(self, data: bytes | bytearray | memoryview) -> list[list[Message]]:
+        """Take received bytes; return the messages of each packet they completed, in order.
+
+        Raises:
+            FormatError: a packet is malformed (other than too large).
+        """
+        if self._skip:
+            take = min(self._skip, len(data))
+            self._skip -= take
+            data = data[take:]
+        buffer = self._buffer
+        buffer += data
+        packets: list[list[Message]] = []
+        pos = 0
+        end = len(buffer)
+        view = memoryview(buffer)
+        try:
+            while end - pos >= PACKET_HEADER:
+                size, count, _flag = _PACKET.unpack_from(buffer, pos)
+                if size > self.max_size and size >= PACKET_HEADER:
+                    self.oversized += 1
+                    self.oversized_messages += max(count, 0)
+                    have = end - pos
+                    if have >= size:
+                        pos += size
+                        continue
+                    self._skip = size - have
+                    pos = end
+                    break
+                _check_header(size, count, self.max_size)
+                if end - pos < size:
+                    break
+                packets.append(_decode_body(view, pos + PACKET_HEADER, pos + size, count))
+                pos += size
+        finally:
+            view.release()
+        if pos:
+            del buffer[:pos]
+        return packets
+
+
+def decode_stream(data: bytes, max_size: int = DEFAULT_MAX_PACKET) -> list[list[Message]]:
+    """Decode back-to-back whole packets (a recorded direction of a connection).
+
+    Raises:
+        FormatError: a packet is malformed, or the bytes end inside one.
+    """
+    reader = PacketReader(max_size)
+    packets = reader.feed(data)
+    if reader.pending or reader.oversized:
+        msg = f"stream ends inside a packet ({reader.pending} bytes of it)"
+        raise FormatError(msg)
+    return packets
+
+
+# --------------------------------------------------------------------------------------------
+# Messages a client sends
+
+
+def handshake_message(name: str, time: float, *, asynchronous: bool = True) -> Message:
+    """The ``i`` message after :data:`HANDSHAKE`: the client's name, async or not."""
+    return Message(
+        MsgType.DATA,
+        DataType.STRING,
+        ASYNC_KEY if asynchronous else "",
+        time,
+        string=_text(name),
+    )
+
+
+def timing_message(time: float) -> Message:
+    """The ``T`` message an async client sends at least once a second (keep-alive, skew)."""
+    return Message(MsgType.TIMING, DataType.DOUBLE, "_async_timing", time, double=0.0)
+
+
+def register(client: str, key: str, interval: float, time: float) -> Message:
+    """Subscribe ``client`` to ``key``, at most one message every ``interval`` seconds."""
+    return Message(MsgType.REGISTER, DataType.DOUBLE, key, time, double=interval, source=client)
+
+
+def unregister(client: str, key: str, time: float) -> Message:
+    """Unsubscribe ``client`` from ``key``."""
+    return Message(MsgType.UNREGISTER, DataType.DOUBLE, key, time, double=0.0, source=client)
+
+
+def wildcard_register(
+    client: str, var_pattern: str, app_pattern: str, interval: float, time: float
+) -> Message:
+    """Subscribe ``client`` to the variables matching ``var_pattern`` (MOOS globs).
+
+    ``app_pattern`` must match the writer of a variable's first write; the DB parses the
+    text as ``MOOSAddValToString``'s comma list.
+
+    Raises:
+        ValueError: a pattern holds ``,`` or ``=``, which the DB's parser cannot carry.
+    """
+    for pattern in (var_pattern, app_pattern):
+        if "," in pattern or "=" in pattern:
+            msg = f"a MOOS wildcard pattern cannot hold ',' or '=': {pattern!r}"
+            raise ValueError(msg)
+    text = f"AppPattern={app_pattern},VarPattern={var_pattern},Interval={interval:.6f}"
+    return Message(
+        MsgType.WILDCARD_REGISTER,
+        DataType.STRING,
+        client,
+        time,
+        string=_text(text),
+        source=client,
+    )
+
+
+def notify(
+    key: str,
+    value: float | str | bytes,
+    time: float,
+    source: str,
+    aux: str = "",
+    community: str = "",
+) -> Message:
+    """A notification (``N``): a double, a string or binary data, as given."""
+    if isinstance(value, bytes):
+        return _new_message(
+            Message, "N", "B", key, time, -1.0, value, source, aux, community, -1.0, -1
+        )
+    if isinstance(value, str):
+        return _new_message(
+            Message, "N", "S", key, time, -1.0, _text(value), source, aux, community, -1.0, -1
+        )
+    return _new_message(
+        Message, "N", "D", key, time, float(value), b"", source, aux, community, -1.0, -1
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# The DB's answer to the handshake
+
+
+@dataclass(frozen=True, slots=True)
+class Welcome:
+    """What the DB's welcome says.
+
+    Attributes:
+        community: the DB's community.
+        host: the DB's host name (``hostname=`` in the aux source), if given.
+        skew: the DB's time minus the client's handshake time. On the same host this is the
+            DB's 100 ms pause before reading the handshake, not a clock offset.
+        asynchronous: whether the DB accepts asynchronous clients.
+    """
+
+    community: str
+    host: str
+    skew: float
+    asynchronous: bool
+
+
+def parse_welcome(messages: Sequence[Message]) -> Welcome:
+    """Read the DB's answer to the handshake.
+
+    Raises:
+        FormatError: the answer is a poison message (for example: a client of that name is
+            already connected), or neither a welcome nor a poison message.
+    """
+    if not messages:
+        msg = "the MOOSDB answered the handshake with an empty packet"
+        raise FormatError(msg)
+    first = messages[0]
+    text = first.string.decode("utf-8", "replace")
+    if first.msg_type == MsgType.POISON:
+        msg = f"the MOOSDB refused the connection: {text or 'no reason given'}"
+        raise FormatError(msg)
+    if first.msg_type != MsgType.WELCOME:
+        msg = f"the MOOSDB answered the handshake with a {first.msg_type!r} message"
+        raise FormatError(msg)
+    host = first.aux.partition("hostname=")[2] if "hostname=" in first.aux else ""
+    return Welcome(first.community, host, first.double, text == ASYNC_KEY)
