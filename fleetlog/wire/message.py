@@ -1,7 +1,7 @@
 """MOOS messages on Zenoh: payload, encoding and attachment (docs/wire.md).
 
 * The payload is the value: UTF-8 text for strings, the decimal text of the number for doubles
-  (Python's shortest round-trip ``repr``), raw bytes for binary.
+  (Python's shortest round-trip ``repr``; a NaN keeps its sign: ``-nan``), raw bytes for binary.
 * The encoding says which of the three it is (:data:`ENCODINGS`). A sample with any other
   encoding (a plain Zenoh publisher) is classified by its payload: a number → double, other
   UTF-8 text → string, anything else → binary.
@@ -131,6 +131,8 @@ def decode_value(payload: bytes, kind: Kind | None) -> tuple[Kind, float | str |
 def encode_value(value: float | str | bytes) -> tuple[Kind, bytes]:
     """Return the kind and payload bytes of a value."""
     if type(value) is float:  # the common case first: one check instead of four
+        if value != value:
+            return Kind.DOUBLE, _nan_text(value)
         return Kind.DOUBLE, repr(value).encode("ascii")
     if isinstance(value, bytes | bytearray | memoryview):
         return Kind.BINARY, bytes(value)
@@ -141,7 +143,13 @@ def encode_value(value: float | str | bytes) -> tuple[Kind, bytes]:
     if isinstance(value, bool):
         msg = "a MOOS value is a float, a str or bytes, not a bool"
         raise TypeError(msg)
-    return Kind.DOUBLE, repr(float(value)).encode("ascii")
+    number = float(value)
+    return Kind.DOUBLE, _nan_text(number) if number != number else repr(number).encode("ascii")
+
+
+def _nan_text(value: float) -> bytes:
+    # repr() drops a NaN's sign; C++ (and so pLogger) prints "-nan", and float() reads it.
+    return b"-nan" if math.copysign(1.0, value) < 0 else b"nan"
 
 
 @dataclass(frozen=True, slots=True)

@@ -99,6 +99,25 @@ def test_value_round_trip(value: float | str | bytes) -> None:
 
 
 @pytest.mark.parametrize(
+    ("value", "text"),
+    [
+        (float("nan"), b"nan"),
+        (-float("nan"), b"-nan"),
+        (math.copysign(float("nan"), -1.0), b"-nan"),
+        (float("-inf"), b"-inf"),
+        (-0.0, b"-0.0"),
+    ],
+)
+def test_a_nan_keeps_its_sign_on_the_wire(value: float, text: bytes) -> None:
+    assert encode_value(value) == (Kind.DOUBLE, text)
+    _, got, garbled = decode_value(text, Kind.DOUBLE)
+    assert not garbled
+    assert isinstance(got, float)
+    assert math.copysign(1.0, got) == math.copysign(1.0, value)
+    assert math.isnan(got) == math.isnan(value)
+
+
+@pytest.mark.parametrize(
     ("encoding", "kind"),
     [
         ("text/plain;moos-double", Kind.DOUBLE),
