@@ -63,7 +63,8 @@ MAX_FILE_BYTES = 200
 MAX_NAME_BYTES = 255
 MAX_PATH_BYTES = 4095
 
-#: How alogs are compressed: ``CompressAlogs = true`` → zstd, ``= gzip`` → gzip (§12).
+#: How alogs are compressed: ``CompressAlogs = true`` (or ``gzip``) → gzip as pLogger writes it,
+#: ``= zstd`` → zstd, fleetlog's explicit choice (DESIGN_NOTES "Compression").
 CompressMode = Literal["none", "zstd", "gzip"]
 #: Which pLogger's on-disk variant to write (``alog.Variant`` values).
 VariantName = Literal["ivp", "em"]
@@ -168,8 +169,9 @@ class LoggerConfig:
         log_aux_src: ``LogAuxSrc``.
         mark_external_community_messages: ``MarkExternalCommunityMessages``.
         mark_data_type: ``MarkDataType``.
-        compress_alogs: ``CompressAlogs``: ``gzip`` → ``"gzip"`` (pLogger's ``.alog.gz``),
-            ``zstd`` or any true value → ``"zstd"``, anything else → ``"none"`` (§12).
+        compress_alogs: ``CompressAlogs``: any true value or ``gzip`` → ``"gzip"`` (pLogger's
+            ``.alog.gz``, which MOOS users' tools open), ``zstd`` → ``"zstd"`` (fleetlog's
+            explicit choice), anything else → ``"none"``.
         dynamic_sync_log_columns: ``DynamicSyncLogColumns`` (0 with a mission file).
         wildcard_logging: ``WildcardLogging``; true when the mission has no block for
             ``app_name`` at all.
@@ -342,10 +344,10 @@ def _sync_log(reader: _Reader) -> tuple[bool, float]:
 def _compress_mode(reader: _Reader) -> CompressMode:
     value = reader.string("CompressAlogs", "")
     lowered = value.lower()
-    if lowered == "gzip":
-        return "gzip"
-    if lowered == "zstd" or _moos_bool(value):
+    if lowered == "zstd":
         return "zstd"
+    if lowered == "gzip" or _moos_bool(value):
+        return "gzip"
     return "none"
 
 

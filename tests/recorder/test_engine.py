@@ -891,7 +891,7 @@ def feed_some(rig: Rig) -> None:
 def test_compress_zstd_flushes_a_frame_within_a_second(
     rigs: Callable[..., Rig], tmp_path: Path
 ) -> None:
-    rig = rigs(COMPRESS_BLOCK.format(mode="true", xlog="true"))
+    rig = rigs(COMPRESS_BLOCK.format(mode="zstd", xlog="true"))
     root = rig.root
     assert sorted(p.name for p in rig.dir.iterdir()) == sorted(
         [f"{root}{ext}" for ext in (".alog.zst", ".xlog.zst", ".ylog", ".blog")] + [META]
@@ -926,8 +926,9 @@ def test_compress_zstd_flushes_a_frame_within_a_second(
     assert xlog.endswith((plain_dir / root / f"{root}.xlog").read_text())
 
 
-def test_compress_gzip_is_plogger_gz(rigs: Callable[..., Rig]) -> None:
-    rig = rigs(COMPRESS_BLOCK.format(mode="gzip", xlog="false"))
+@pytest.mark.parametrize("mode", ["true", "gzip"])
+def test_compress_gzip_is_plogger_gz(rigs: Callable[..., Rig], mode: str) -> None:
+    rig = rigs(COMPRESS_BLOCK.format(mode=mode, xlog="false"))
     root = rig.root
     assert sorted(p.name for p in rig.dir.iterdir()) == sorted(
         [f"{root}{ext}" for ext in (".alog.gz", ".xlog.gz", ".ylog", ".blog")] + [META]
