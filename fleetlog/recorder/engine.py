@@ -28,6 +28,7 @@ from fleetlog.moos.slog import SlogTable, SlotPatch
 from fleetlog.moos.ylog import format_ylog_line
 from fleetlog.recorder.control import CommandHandler
 from fleetlog.storage.metafile import boot_id, host_name, mark_cut_sessions
+from fleetlog.storage.procinfo import ProcessMonitor
 from fleetlog.storage.session import SessionLayout, SessionWriter
 from fleetlog.wire.control import Outcome
 from fleetlog.wire.message import MoosMessage
@@ -74,6 +75,9 @@ class RecorderStats:
     #: samples that publishers with sample-miss detection (DROP) sent but never arrived;
     #: those of variables the recorder logs are also in ``lost``
     missed: int = 0
+    #: samples whose type differs from their variable's first (MOOS keeps the first type;
+    #: the recorder logs both)
+    type_clashes: int = 0
     write_errors: int = 0
     refused_copies: int = 0
     sessions: int = 0
@@ -96,6 +100,8 @@ class _Var:
     system: bool
     last_logged: float = -1e300
     last_seen: float | None = None
+    #: the type of the variable's first value (float, str or bytes)
+    kind: type | None = None
 
 
 @dataclass
@@ -198,6 +204,10 @@ class Recorder:
         self._boot = boot_id()
         #: sessions found cut at start, marked by the first session's first entries
         self.cut_sessions: list[SessionMeta] = []
+        #: CMOOSApp's status fields: CPU and memory, what it posts, what it receives
+        self._proc = ProcessMonitor()
+        self._published: set[str] = set()
+        self._subscribed: set[str] = set()
 
     # ---------------------------------------------------------------------------------------
     # Sessions
@@ -458,6 +468,7 @@ class Recorder:
     def post(self, name: str, value: float | str) -> None:
         """Publish a message as pLogger (it comes back and is logged like any other)."""
         now = self._clock()
+        self._published.add(name)
         self._publish(MoosMessage(name, value, now, self.app_name, "", self.vehicle))
 
     def debug(self, text: str) -> None:
@@ -479,6 +490,9 @@ class Recorder:
         var = _Var(verdict, period, name.upper() in _SYSTEM_VARS)
         if len(self._vars) > 65536:
             self._vars.clear()
+            self._subscribed.clear()
+        if verdict is not Verdict.IGNORE:
+            self._subscribed.add(name)
         self._vars[name] = var
         return var
 
@@ -508,6 +522,12 @@ class Recorder:
             stats.garbled += 1
         name = msg.name
         var = self._vars.get(name) or self._var(name)
+        kind = type(msg.value)
+        if var.kind is not kind:
+            if var.kind is None:
+                var.kind = kind
+            else:
+                stats.type_clashes += 1
         is_command = name == self._restart_var or name == self._command_var
         now = self._clock()
         var.last_seen = now
@@ -749,16 +769,27 @@ class Recorder:
             self.debug(f'Monitored Variable "{name}" is not appearing')
 
     def status_text(self, now: float) -> str:
-        """Return the PLOGGER_STATUS text: CMOOSApp's fields, LogAuxSrc, and the counters."""
+        """Return the PLOGGER_STATUS text: CMOOSApp's fields, LogAuxSrc, and the counters.
+
+        CMOOSApp's fields in its order (``cpuload``, ``memory_kb``, ``memory_max_kb``,
+        ``Publishing`` and ``Subscribing`` as quoted comma-terminated lists), with
+        ``Community`` after ``MOOSName``, before the lists, so a reader finds it first.
+        """
         s = self.stats
         directory = self.session.directory if self.session else ""
+        subscribed = self._subscribed | {*self._specs, self._restart_var, self._command_var}
+        publishing = "".join(f"{n}," for n in sorted(self._published))
+        subscribing = "".join(f"{n}," for n in sorted(subscribed))
         return (
             f"AppErrorFlag={'true' if s.lost else 'false'},Uptime={now - self.started:.6g},"
+            f"{self._proc.fields()},"
             f"MOOSName={self.app_name},Community={self.vehicle},"
+            f'Publishing="{publishing}",Subscribing="{subscribing}",'
             f"LogAuxSrc={'true' if self.config.log_aux_src else 'false'},"
             f"Received={s.received},Logged={s.logged},Excluded={s.excluded},"
             f"Throttled={s.throttled},Skewed={s.skewed},Garbled={s.garbled},Lost={s.lost},"
-            f"Missed={s.missed},WriteErrors={s.write_errors},Sessions={s.sessions},Directory={directory}"
+            f"Missed={s.missed},TypeClashes={s.type_clashes},WriteErrors={s.write_errors},"
+            f"Sessions={s.sessions},Directory={directory}"
         )
 
     def flush_due(self, max_delay: float = 0.01) -> bool:

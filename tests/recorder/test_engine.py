@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import gzip
 import os
+import re
 import resource
 import shutil
 import signal
@@ -1228,3 +1229,55 @@ def test_global_log_path_wins_over_path(rigs: Callable[..., Rig], tmp_path: Path
     assert rig.rec.session is not None
     assert rig.rec.session.directory == f"global/{root_at('G')}"
     assert rig.dir == tmp_path / "global" / root_at("G")
+
+
+# --------------------------------------------------------------------------------------------
+# PLOGGER_STATUS holds CMOOSApp's fields; type clashes are counted (issue 14)
+
+
+def test_status_holds_cmoosapps_fields_in_its_order(rigs: Callable[..., Rig]) -> None:
+    rig = rigs("    Log = NAV_X @ 0\n    WildcardLogging = true\n")
+    rig.send("DEPTH", 3.0, at=0.5)
+    rig.loop_back()
+    rig.clock.at(2.5)
+    rig.rec.tick()
+    (status,) = rig.take("PLOGGER_STATUS")
+    text = str(status.value)
+    fields = re.findall(r'(?:^|,)([A-Za-z_]+)=("[^"]*"|[^,]*)', text)
+    names = [name for name, _ in fields]
+    # CMOOSApp's order (core-moos MOOSApp.cpp MakeStatusString), Community after MOOSName
+    assert names[:10] == [
+        "AppErrorFlag",
+        "Uptime",
+        "cpuload",
+        "memory_kb",
+        "memory_max_kb",
+        "MOOSName",
+        "Community",
+        "Publishing",
+        "Subscribing",
+        "LogAuxSrc",
+    ]
+    values = dict(fields)
+    assert float(values["cpuload"]) >= 0
+    assert float(values["memory_kb"]) > 1000  # a Python process holds megabytes
+    assert float(values["memory_max_kb"]) >= 1000
+    assert values["Publishing"] == '"LOGGER_DIRECTORY,PLOGGER_STATUS,"'
+    subscribing = values["Subscribing"].strip('"').split(",")
+    assert subscribing[-1] == ""  # comma-terminated, as CMOOSApp writes it
+    assert {"DEPTH", "NAV_X", "LOGGER_RESTART", "PLOGGER_CMD", "PLOGGER_STATUS"} <= set(
+        subscribing
+    )
+    assert subscribing[:-1] == sorted(subscribing[:-1])
+    assert "TypeClashes=0" in text
+
+
+def test_a_type_clash_is_logged_and_counted(rigs: Callable[..., Rig]) -> None:
+    rig = rigs("    WildcardLogging = true\n")
+    rig.send("X", 1.0, at=0.1)
+    rig.send("X", "one", at=0.2)
+    rig.send("X", b"\x01", at=0.3)
+    rig.send("X", 2.0, at=0.4)
+    assert rig.rec.stats.type_clashes == 2
+    assert [e.value for e in rig.entries() if e.key == "X"][:2] == [1.0, "one"]
+    assert rig.rec.stats.as_dict()["type_clashes"] == 2
