@@ -63,6 +63,14 @@ def config(body: str, *, head: str = "", app: str = "pLogger") -> LoggerConfig:
     return parse_mission(mission_text(body, head=head, app=app), "test.moos").logger_config(app)
 
 
+#: one ``Name=value`` of a status text; CMOOSApp quotes its lists, which hold commas
+STATUS_FIELD = r'(?:^|,)([A-Za-z_]+)=("[^"]*"|[^,]*)'
+
+
+def status_fields(text: str) -> dict[str, str]:
+    return dict(re.findall(STATUS_FIELD, text))
+
+
 def root_at(file: str, when: float = T0) -> str:
     return session_root(file, time.localtime(when), True)
 
@@ -311,7 +319,7 @@ def test_status_counters(rigs: Callable[..., Rig]) -> None:
     rig.rec.tick()
     first, status = rig.take("PLOGGER_STATUS")  # one at session start, one 2 s later
     assert "Received=0," in str(first.value)
-    fields = dict(item.split("=", 1) for item in str(status.value).split(","))
+    fields = status_fields(str(status.value))
     assert fields["AppErrorFlag"] == "false"
     assert fields["MOOSName"] == "pLogger"
     assert fields["Community"] == rig.rec.vehicle
@@ -1243,7 +1251,7 @@ def test_status_holds_cmoosapps_fields_in_its_order(rigs: Callable[..., Rig]) ->
     rig.rec.tick()
     (status,) = rig.take("PLOGGER_STATUS")
     text = str(status.value)
-    fields = re.findall(r'(?:^|,)([A-Za-z_]+)=("[^"]*"|[^,]*)', text)
+    fields = re.findall(STATUS_FIELD, text)
     names = [name for name, _ in fields]
     # CMOOSApp's order (core-moos MOOSApp.cpp MakeStatusString), Community after MOOSName
     assert names[:10] == [
