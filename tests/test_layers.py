@@ -1,8 +1,8 @@
 """The layering of shared/STYLE.md §4, enforced.
 
-Imports flow one way: cli -> engines (recorder, query, replayer, tools) -> storage | transport
--> wire -> moos -> errors. Only transport/ imports zenoh, only cli/ imports typer, and the pure
-layers (moos/, wire/) never touch files, sockets or clocks.
+Imports flow one way: cli -> engines (recorder, query, replayer, tools, bridge) -> storage |
+transport -> wire -> moos -> errors. Only transport/ imports zenoh, only cli/ imports typer, and
+the pure layers (moos/, wire/) never touch files, sockets or clocks.
 """
 
 from __future__ import annotations
@@ -26,10 +26,11 @@ ALLOWED: dict[str, set[str]] = {
     "query": {"moos", "wire", "storage", "transport"},
     "replayer": {"moos", "wire", "storage", "transport", "query"},
     "tools": {"moos", "wire", "storage"},
+    "bridge": {"moos", "wire", "storage", "transport"},
     "api": {"moos", "wire", "transport"},
     "cli": {
         *("moos", "wire", "storage", "transport"),
-        *("recorder", "query", "replayer", "tools", "api"),
+        *("recorder", "query", "replayer", "tools", "api", "bridge"),
     },
 }
 PURE_FORBIDDEN = {"socket", "zenoh", "typer", "threading", "subprocess", "shutil"}

@@ -25,27 +25,25 @@ from fleetlog.cli.options import (
     session_options,
 )
 from fleetlog.errors import UsageError
-from fleetlog.moos.mission import LoggerConfig, parse_mission
+from fleetlog.moos.mission import LoggerConfig, Mission, parse_mission
 from fleetlog.query.server import LogServer
 from fleetlog.recorder.engine import Recorder
 from fleetlog.recorder.service import RecorderService, ServiceOptions
 from fleetlog.storage.catalog import LogCatalog
 from fleetlog.transport.queries import ZenohSession
 
-__all__ = ["load_config", "record"]
+__all__ = ["load_config", "read_mission", "record"]
 
 Attach: TypeAlias = "Callable[[ZenohSession, Recorder], Callable[[], None]]"
 
 
-def load_config(mission: Path | None, app_name: str) -> LoggerConfig:
-    """Read the pLogger configuration from a mission file, or pLogger's defaults without one.
+def read_mission(mission: Path) -> Mission:
+    """Read and parse a mission file.
 
     Raises:
-        UsageError: the mission file cannot be read.
+        UsageError: the file cannot be read or is binary.
         MissionError: the mission file is malformed (names the file and line).
     """
-    if mission is None:
-        return LoggerConfig.default(app_name)
     try:
         text = mission.read_bytes().decode("utf-8", "surrogateescape")
     except FileNotFoundError:
@@ -57,7 +55,19 @@ def load_config(mission: Path | None, app_name: str) -> LoggerConfig:
     if "\0" in text:
         msg = f"mission file {mission} is binary (it holds NUL bytes), not a MOOS mission file"
         raise UsageError(msg)
-    parsed = parse_mission(text, str(mission), env=os.environ)
+    return parse_mission(text, str(mission), env=os.environ)
+
+
+def load_config(mission: Path | None, app_name: str) -> LoggerConfig:
+    """Read the pLogger configuration from a mission file, or pLogger's defaults without one.
+
+    Raises:
+        UsageError: the mission file cannot be read.
+        MissionError: the mission file is malformed (names the file and line).
+    """
+    if mission is None:
+        return LoggerConfig.default(app_name)
+    parsed = read_mission(mission)
     if parsed.block(app_name) is None:
         # pLogger then logs every variable (§6.4), which a misspelt --app-name or block hides.
         print(

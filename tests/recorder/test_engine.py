@@ -1273,9 +1273,7 @@ def test_status_holds_cmoosapps_fields_in_its_order(rigs: Callable[..., Rig]) ->
     assert values["Publishing"] == '"LOGGER_DIRECTORY,PLOGGER_STATUS,"'
     subscribing = values["Subscribing"].strip('"').split(",")
     assert subscribing[-1] == ""  # comma-terminated, as CMOOSApp writes it
-    assert {"DEPTH", "NAV_X", "LOGGER_RESTART", "PLOGGER_CMD", "PLOGGER_STATUS"} <= set(
-        subscribing
-    )
+    assert {"DEPTH", "NAV_X", "LOGGER_RESTART", "PLOGGER_CMD", "PLOGGER_STATUS"} <= set(subscribing)
     assert subscribing[:-1] == sorted(subscribing[:-1])
     assert "TypeClashes=0" in text
 
