@@ -203,9 +203,9 @@ def check_lines(case: tuple[list[Any], bool, bool, bool, float]) -> None:
                     # pLogger's format cannot tell a string that looks like a padded double
                     # from a double without MarkDataType (docs/wire.md); the text survives.
                     assert entry.text == value.rstrip(" ")
-                    expected = classify_value(value)[0]
-                    assert isinstance(expected, float)
-                    assert expected == entry.value or math.isnan(entry.value)
+                    classified = classify_value(value)[0]
+                    assert isinstance(classified, float)
+                    assert classified == entry.value or math.isnan(entry.value)
                 elif isinstance(value, str):
                     assert entry.value == value
                 elif isinstance(value, bytes):
