@@ -1,0 +1,515 @@
+"""Who may do what on which key: the access-control table of the security profile.
+
+Every key of ``docs/wire.md`` has one :class:`KeyRule` in :data:`KEY_RULES`, and every rule
+names, for every :class:`Role`, the :class:`Action` set that role may take on the key (an
+empty set is a rule too: "nothing"). :func:`access_control` turns the table into the
+``access_control`` section of a Zenoh configuration, the same for every router of the fleet,
+so that a stranger reaching any router, a vehicle's included, is refused alike.
+
+Adding a key: add its row to docs/wire.md's key table and a :class:`KeyRule` here, with all
+four roles; ``tests/wire/test_access.py`` walks the table and fails on a key without one.
+
+Identities are certificate common names in a form no public certificate authority issues
+(``fleetlog:vehicle:alpha``): Zenoh's TLS layer also trusts the public WebPKI roots beside the
+fleet's CA (eclipse-zenoh/zenoh#2764), so a name a public CA could sign must never be
+granted anything, and no rule grants anything to "any valid certificate".
+
+Zenoh checks a message against a rule by *inclusion*: a rule on ``fleet/*/var/**`` allows a
+subscription to ``fleet/*/var/**`` or ``fleet/alpha/var/NAV_X``, but ``fleet/**`` does not
+include ``fleet/alpha/@fleetlog/status`` (``@fleetlog`` is a verbatim chunk). So each rule's
+key is written per kind of key, never as one ``fleet/**``.
+"""
+
+from __future__ import annotations
+
+import enum
+import re
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from fleetlog.errors import FormatError
+from fleetlog.moos.patterns import name_to_chunk
+
+__all__ = [
+    "CN_PREFIX",
+    "DATA",
+    "DECLARATIONS",
+    "KEY_RULES",
+    "MESSAGES",
+    "Action",
+    "Flow",
+    "Identity",
+    "KeyRule",
+    "Profile",
+    "Role",
+    "access_control",
+    "common_name",
+    "grants_of",
+    "messages_of",
+    "parse_common_name",
+]
+
+
+class Role(enum.Enum):
+    """What a certificate is for; the middle part of its common name."""
+
+    #: the processes of one vehicle (recorder, bridge, apps), on that vehicle's keys
+    VEHICLE = "vehicle"
+    #: a person or a shore service (fleet, fetch, query, collect, poke of commands)
+    OPERATOR = "operator"
+    #: a replay host: publishes only under the replay prefix (and vehicles granted to it)
+    REPLAY = "replay"
+    #: a Zenoh router of the fleet: it forwards what the edge routers let in
+    ROUTER = "router"
+
+
+class Action(enum.Enum):
+    """What a role may do on a key; each is a set of Zenoh messages (:func:`messages_of`)."""
+
+    PUBLISH = "publish"
+    SUBSCRIBE = "subscribe"
+    SERVE = "serve"
+    ASK = "ask"
+    TOKEN = "token"
+    WATCH = "watch"
+
+
+class Flow(enum.Enum):
+    """Zenoh's ACL flows, seen from the router: ingress from the subject, egress to it."""
+
+    INGRESS = "ingress"
+    EGRESS = "egress"
+
+
+#: every message type Zenoh's access control filters
+MESSAGES = (
+    "put",
+    "delete",
+    "declare_subscriber",
+    "query",
+    "reply",
+    "declare_queryable",
+    "liveliness_token",
+    "liveliness_query",
+    "declare_liveliness_subscriber",
+)
+
+# What each action lets through, and in which flow. Egress declarations are how a publisher
+# or a querier learns that someone listens (a publisher's matching status, a short-lived
+# poke waiting for the recorder), so each action that sends gets the matching one. Nothing
+# in fleetlog deletes, so no action grants "delete".
+_MESSAGES: dict[Action, tuple[tuple[Flow, str], ...]] = {
+    Action.PUBLISH: ((Flow.INGRESS, "put"), (Flow.EGRESS, "declare_subscriber")),
+    Action.SUBSCRIBE: ((Flow.INGRESS, "declare_subscriber"), (Flow.EGRESS, "put")),
+    Action.SERVE: (
+        (Flow.INGRESS, "declare_queryable"),
+        (Flow.INGRESS, "reply"),
+        (Flow.EGRESS, "query"),
+    ),
+    Action.ASK: (
+        (Flow.INGRESS, "query"),
+        (Flow.EGRESS, "reply"),
+        (Flow.EGRESS, "declare_queryable"),
+    ),
+    Action.TOKEN: ((Flow.INGRESS, "liveliness_token"),),
+    Action.WATCH: (
+        (Flow.INGRESS, "liveliness_query"),
+        (Flow.INGRESS, "declare_liveliness_subscriber"),
+        (Flow.EGRESS, "liveliness_token"),
+    ),
+}
+
+#: messages that carry a vehicle's data, an answer or a token to the subject: for a vehicle only its
+#: own keys. The others (queries and declarations sent *to* the subject) may come with a
+#: wildcard where the vehicle is (``fleet/*/@fleetlog/latest`` asks every vehicle), and Zenoh
+#: allows a message only if the rule's key includes the message's, so those are granted on
+#: every vehicle's key: a vehicle learns that someone asks, never someone else's data.
+DATA = frozenset({(Flow.EGRESS, "put"), (Flow.EGRESS, "reply"), (Flow.EGRESS, "liveliness_token")})
+
+
+#: declarations the router sends a subject: on the rule's ``declared`` expression
+DECLARATIONS = frozenset({"declare_subscriber", "declare_queryable"})
+
+
+def messages_of(action: Action) -> tuple[tuple[Flow, str], ...]:
+    """Return the (flow, Zenoh message) pairs an action allows."""
+    return _MESSAGES[action]
+
+
+P, S, SV, A, T, W = (
+    Action.PUBLISH,
+    Action.SUBSCRIBE,
+    Action.SERVE,
+    Action.ASK,
+    Action.TOKEN,
+    Action.WATCH,
+)
+ALL = frozenset(Action)
+NOTHING: frozenset[Action] = frozenset()
+
+
+@dataclass(frozen=True)
+class KeyRule:
+    """The rule of one key of docs/wire.md.
+
+    Attributes:
+        key: the key expression under ``<root>/<V>/`` (``var/**``, ``@fleetlog/status``).
+        wire: the key as docs/wire.md's key table writes it (``<root>/V/var/VAR``).
+        grants: for every role, what it may do on the key.
+        declared: the widest key expression a subscriber or queryable of this key may be
+            declared on (the recorder subscribes to ``var/*``, not to ``var/PLOGGER_CMD``):
+            a publisher learns of subscribers, a querier of queryables, through these
+            declarations, and Zenoh passes one only if a rule's key includes it.
+    """
+
+    key: str
+    wire: str
+    grants: Mapping[Role, frozenset[Action]] = field(default_factory=dict)
+    declared: str = ""
+
+    def __post_init__(self) -> None:
+        missing = [role.value for role in Role if role not in self.grants]
+        if missing:
+            msg = f"access rule for {self.wire} names no grant for {', '.join(missing)}"
+            raise FormatError(msg)
+        if not self.declared:
+            object.__setattr__(self, "declared", self.key)
+
+
+def _rule(
+    key: str,
+    wire: str,
+    *,
+    vehicle: Iterable[Action],
+    operator: Iterable[Action],
+    replay: Iterable[Action],
+    router: Iterable[Action] = ALL,
+    declared: str = "",
+) -> KeyRule:
+    return KeyRule(
+        key,
+        wire,
+        {
+            Role.VEHICLE: frozenset(vehicle),
+            Role.OPERATOR: frozenset(operator),
+            Role.REPLAY: frozenset(replay),
+            Role.ROUTER: frozenset(router),
+        },
+        declared or key,
+    )
+
+
+#: The table. A vehicle's role is on its own keys only; an operator's and a replay host's
+#: reading actions (subscribe, ask, watch) are on every vehicle; a replay host's writing
+#: actions (publish, serve, token) only on the replay prefix's vehicles and on the vehicles
+#: the fleet grants replays into (Profile.replay_into). Routers forward everything the edge
+#: let in.
+KEY_RULES: tuple[KeyRule, ...] = (
+    _rule(
+        "var/**",
+        "<root>/V/var/VAR",
+        vehicle={P, S},
+        operator={S},
+        replay={P},
+    ),
+    _rule(
+        "var/PLOGGER_CMD",
+        "<root>/V/var/PLOGGER_CMD",
+        vehicle={P, S},
+        operator={P, S},
+        replay={P},
+        declared="var/**",
+    ),
+    _rule(
+        "var/LOGGER_RESTART",
+        "<root>/V/var/LOGGER_RESTART",
+        vehicle={P, S},
+        operator={P, S},
+        replay={P},
+        declared="var/**",
+    ),
+    _rule(
+        "var/*/@adv/**",
+        "<root>/V/var/VAR/@adv/pub/ZID/EID/_",
+        vehicle={P, S},
+        operator=NOTHING,
+        replay={P},
+    ),
+    _rule(
+        "@fleetlog/recorder",
+        "<root>/V/@fleetlog/recorder",
+        vehicle={T, W},
+        operator={W},
+        replay={W},
+    ),
+    _rule(
+        "@fleetlog/serve",
+        "<root>/V/@fleetlog/serve",
+        vehicle={T, W},
+        operator={W},
+        replay={W},
+    ),
+    _rule(
+        "@fleetlog/status",
+        "<root>/V/@fleetlog/status",
+        vehicle={SV},
+        operator={A},
+        replay={A},
+    ),
+    _rule(
+        "@fleetlog/control",
+        "<root>/V/@fleetlog/control",
+        vehicle={SV},
+        operator={A},
+        replay=NOTHING,
+    ),
+    _rule(
+        "@fleetlog/latest",
+        "<root>/V/@fleetlog/latest",
+        vehicle={SV},
+        operator={A},
+        replay={A},
+    ),
+    _rule(
+        "@fleetlog/sessions",
+        "<root>/V/@fleetlog/sessions",
+        vehicle={SV},
+        operator={A},
+        replay={A},
+    ),
+    _rule(
+        "@fleetlog/file/*/*",
+        "<root>/V/@fleetlog/file/<session>/<name>",
+        vehicle={SV},
+        operator={A},
+        replay={A},
+    ),
+    _rule(
+        "@fleetlog/grep/*",
+        "<root>/V/@fleetlog/grep/<session>",
+        vehicle={SV},
+        operator={A},
+        replay={A},
+    ),
+    _rule(
+        "@fleetlog/replay/control",
+        "<root>/V/@fleetlog/replay/control",
+        vehicle=NOTHING,
+        operator={A},
+        replay={SV},
+    ),
+    _rule(
+        "@fleetlog/replay/status",
+        "<root>/V/@fleetlog/replay/status",
+        vehicle=NOTHING,
+        operator={S, A},
+        replay={P, SV},
+    ),
+)
+
+_READING = frozenset({Action.SUBSCRIBE, Action.ASK, Action.WATCH})
+
+
+def grants_of(role: Role, key: str, *, declared: bool = False) -> frozenset[Action]:
+    """What a role may do on a key under ``<root>/<V>/`` (union of the rules that match it).
+
+    ``key`` is matched literally against each rule's key expression, with ``*`` one chunk and
+    ``**`` any number of chunks not starting with ``@`` (Zenoh's rule for verbatim chunks).
+    With ``declared``, against the expressions declarations may use (``KeyRule.declared``).
+    """
+    out: set[Action] = set()
+    for rule in KEY_RULES:
+        pattern = rule.declared if declared else rule.key
+        if _includes(pattern.split("/"), key.split("/")):
+            out |= rule.grants[role]
+    return frozenset(out)
+
+
+def _includes(pattern: list[str], chunks: list[str]) -> bool:
+    if not pattern:
+        return not chunks
+    head, rest = pattern[0], pattern[1:]
+    if head == "**":
+        for i in range(len(chunks) + 1):
+            if any(c.startswith("@") for c in chunks[:i]):
+                break
+            if _includes(rest, chunks[i:]):
+                return True
+        return False
+    if not chunks:
+        return False
+    chunk = chunks[0]
+    ok = not chunk.startswith("@") if head == "*" else head == chunk
+    return ok and _includes(rest, chunks[1:])
+
+
+# -- identities ------------------------------------------------------------------------------
+
+#: every common name of the fleet starts so; no public CA issues names with colons
+CN_PREFIX = "fleetlog:"
+_NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]{0,62}$")
+
+
+@dataclass(frozen=True, slots=True)
+class Identity:
+    """A certificate's identity: its role, its name, and its generation.
+
+    A revoked identity's name gets a new generation (``fleetlog:vehicle:bravo:2``): Zenoh has
+    no revocation list, so the old certificate, which stays valid until it expires, must no
+    longer match any rule, while the new one does.
+    """
+
+    role: Role
+    name: str
+    generation: int = 1
+
+    @property
+    def common_name(self) -> str:
+        """The certificate's common name."""
+        return common_name(self.role, self.name, self.generation)
+
+
+def common_name(role: Role, name: str, generation: int = 1) -> str:
+    """Return the common name of an identity (``fleetlog:vehicle:alpha``).
+
+    Raises:
+        FormatError: the name is not 1-63 letters, digits, ``_``, ``.`` or ``-``.
+    """
+    check_name(name, role.value)
+    tail = f":{generation}" if generation > 1 else ""
+    return f"{CN_PREFIX}{role.value}:{name}{tail}"
+
+
+def check_name(name: str, what: str) -> str:
+    """Validate the name of a vehicle, operator, replay host or router.
+
+    Raises:
+        FormatError: the name is not 1-63 letters, digits, ``_``, ``.`` or ``-``, starting
+            with a letter or digit.
+    """
+    if not _NAME_RE.match(name):
+        msg = (
+            f"{what} name {name!r} must be 1-63 letters, digits, '_', '.' or '-',"
+            " starting with a letter or a digit"
+        )
+        raise FormatError(msg)
+    return name
+
+
+def parse_common_name(cn: str) -> Identity:
+    """Read an identity from a certificate's common name.
+
+    Raises:
+        FormatError: the name is not a fleetlog identity.
+    """
+    parts = cn.split(":")
+    if len(parts) not in (3, 4) or parts[0] + ":" != CN_PREFIX:
+        msg = f"certificate name {cn!r} is not a fleetlog identity (fleetlog:ROLE:NAME)"
+        raise FormatError(msg)
+    try:
+        role = Role(parts[1])
+    except ValueError:
+        roles = ", ".join(r.value for r in Role)
+        msg = f"certificate name {cn!r} has no fleetlog role ({roles})"
+        raise FormatError(msg) from None
+    generation = 1
+    if len(parts) == 4:
+        if not parts[3].isdigit() or int(parts[3]) < 2:
+            msg = f"certificate name {cn!r} has a bad generation {parts[3]!r}"
+            raise FormatError(msg)
+        generation = int(parts[3])
+    check_name(parts[2], role.value)
+    return Identity(role, parts[2], generation)
+
+
+# -- the profile -----------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Profile:
+    """The identities of a fleet and what the security profile grants them.
+
+    Attributes:
+        root: the key root.
+        identities: every identity that is not revoked.
+        replay_prefix: replayed vehicles' names start with it (``sim_alpha``).
+        replay_into: live vehicles that replay hosts may publish into.
+    """
+
+    root: str
+    identities: tuple[Identity, ...]
+    replay_prefix: str = "sim_"
+    replay_into: tuple[str, ...] = ()
+
+    def of(self, role: Role) -> list[Identity]:
+        """The identities of one role, by name."""
+        return sorted((i for i in self.identities if i.role is role), key=lambda i: i.name)
+
+
+def _vehicle_chunks(profile: Profile, role: Role, who: Identity, writing: bool) -> list[str]:
+    """The key chunks standing for "which vehicle" in a role's rules."""
+    if role is Role.VEHICLE:
+        return [name_to_chunk(who.name)]
+    if role is Role.REPLAY and writing:
+        prefix = name_to_chunk(profile.replay_prefix)
+        return [f"{prefix}$*", *(name_to_chunk(v) for v in profile.replay_into)]
+    return ["*"]
+
+
+def _rules_for(profile: Profile, who: Identity) -> dict[tuple[Flow, str], set[str]]:
+    """Every (flow, message) → key expressions one identity is allowed."""
+    allowed: dict[tuple[Flow, str], set[str]] = {}
+    role = who.role
+    for rule in KEY_RULES:
+        for action in rule.grants[role]:
+            writing = action in (Action.PUBLISH, Action.SERVE, Action.TOKEN)
+            for flow, message in messages_of(action):
+                if role is Role.VEHICLE and (flow, message) not in DATA and flow is Flow.EGRESS:
+                    chunks = ["*"]
+                else:
+                    chunks = _vehicle_chunks(profile, role, who, writing)
+                declaration = flow is Flow.EGRESS and message in DECLARATIONS
+                key = rule.declared if declaration else rule.key
+                keys = allowed.setdefault((flow, message), set())
+                keys.update(f"{profile.root}/{chunk}/{key}" for chunk in chunks)
+    return allowed
+
+
+def access_control(profile: Profile) -> dict[str, Any]:
+    """Build the ``access_control`` section every router of the fleet runs.
+
+    Default deny; one subject per identity (its exact common name), one rule per identity,
+    flow and message type, and one policy tying them. Nothing is granted to a subject
+    without a common name, nor to an interface or a protocol alone.
+    """
+    rules: list[dict[str, Any]] = []
+    subjects: list[dict[str, Any]] = []
+    policies: list[dict[str, Any]] = []
+    for role in Role:
+        for who in profile.of(role):
+            sid = f"{role.value}:{who.name}"
+            subjects.append({"id": sid, "cert_common_names": [who.common_name]})
+            ids: list[str] = []
+            for (flow, message), keys in sorted(
+                _rules_for(profile, who).items(), key=lambda kv: (kv[0][0].value, kv[0][1])
+            ):
+                rid = f"{sid}:{flow.value}:{message}"
+                rules.append(
+                    {
+                        "id": rid,
+                        "permission": "allow",
+                        "flows": [flow.value],
+                        "messages": [message],
+                        "key_exprs": sorted(keys),
+                    }
+                )
+                ids.append(rid)
+            policies.append({"id": sid, "rules": ids, "subjects": [sid]})
+    return {
+        "enabled": True,
+        "default_permission": "deny",
+        "rules": rules,
+        "subjects": subjects,
+        "policies": policies,
+    }
