@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import sys
+from pathlib import Path
+from typing import Annotated
 
 import typer
 
 from fleetlog import __version__
+from fleetlog.cli import settings as global_settings
 from fleetlog.errors import FleetlogError
 
 __all__ = ["app", "main"]
@@ -32,8 +35,22 @@ def _root(
     version: bool = typer.Option(
         False, "--version", callback=_version, is_eager=True, help="Print the version and exit."
     ),
+    settings: Annotated[
+        Path | None,
+        typer.Option(
+            "--settings",
+            metavar="FILE",
+            help="fleetlog's settings file [default: $FLEETLOG_SETTINGS, else"
+            " /etc/fleetlog/fleetlog.toml if present].",
+        ),
+    ] = None,
+    verbose: Annotated[
+        bool,
+        typer.Option("--verbose", help="Say which configuration and settings files are used."),
+    ] = False,
 ) -> None:
     """Record, serve and replay MOOS logs for fleets of vehicles over Eclipse Zenoh."""
+    global_settings.configure(settings, verbose)
 
 
 def main() -> None:

@@ -8,7 +8,8 @@ from typing import Annotated
 
 import typer
 
-from fleetlog.errors import FormatError, UsageError
+from fleetlog.cli.settings import say, settings
+from fleetlog.errors import FormatError, TransportError, UsageError
 from fleetlog.transport.session import SessionOptions
 from fleetlog.wire.keys import DEFAULT_ROOT, check_root
 
@@ -62,7 +63,8 @@ Config = Annotated[
         "-c",
         "--config",
         metavar="FILE",
-        help="A Zenoh JSON5 configuration file.",
+        help="A Zenoh JSON5 configuration file [default: $ZENOH_CONFIG, else"
+        " /etc/fleetlog/zenoh.json5 if present].",
         rich_help_panel=_ZENOH,
     ),
 ]
@@ -74,10 +76,25 @@ NoScouting = Annotated[
         rich_help_panel=_ZENOH,
     ),
 ]
+
+
+def _root_setting(ctx: typer.Context, param: typer.CallbackParam, value: str) -> str:
+    """``--root`` not given: the settings file's root, if it names one."""
+    source = ctx.get_parameter_source(param.name or "root")
+    if source is not None and source.name == "DEFAULT":
+        return settings().get("root") or value
+    return value
+
+
 Root = Annotated[
     str,
     typer.Option(
-        "--root", metavar="ROOT", help="Key root of the fleet's keys.", rich_help_panel=_ZENOH
+        "--root",
+        metavar="ROOT",
+        help="Key root of the fleet's keys [default: the settings file's root, else fleet].",
+        rich_help_panel=_ZENOH,
+        callback=_root_setting,
+        show_default=False,
     ),
 ]
 
@@ -101,13 +118,20 @@ def session_options(
         what = "is not a file" if config.exists() else "does not exist"
         msg = f"Zenoh configuration file {config} {what}"
         raise UsageError(msg)
-    return SessionOptions(
+    options = SessionOptions(
         mode=mode,
         connect=tuple(connect or ()),
         listen=tuple(listen or ()),
         config=config,
         multicast_scouting=not no_multicast_scouting,
     )
+    try:
+        source = options.source()
+    except TransportError as err:
+        raise UsageError(str(err)) from None
+    say(f"Zenoh configuration: {source.describe()}")
+    say(f"settings: {settings().describe()}")
+    return options
 
 
 def checked_root(root: str) -> str:
