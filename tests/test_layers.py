@@ -28,9 +28,10 @@ ALLOWED: dict[str, set[str]] = {
     "tools": {"moos", "wire", "storage"},
     "bridge": {"moos", "wire", "storage", "transport"},
     "api": {"moos", "wire", "transport"},
+    "deploy": {"moos", "wire", "storage", "transport"},
     "cli": {
         *("moos", "wire", "storage", "transport"),
-        *("recorder", "query", "replayer", "tools", "api", "bridge"),
+        *("recorder", "query", "replayer", "tools", "api", "bridge", "deploy"),
     },
 }
 PURE_FORBIDDEN = {"socket", "zenoh", "typer", "threading", "subprocess", "shutil"}
