@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import os
 import signal
 import socket
@@ -24,12 +25,14 @@ from fleetlog.cli.options import (
     checked_vehicle,
     session_options,
 )
+from fleetlog.cli.settings import settings
 from fleetlog.errors import UsageError
 from fleetlog.moos.mission import LoggerConfig, Mission, parse_mission
 from fleetlog.query.server import LogServer
 from fleetlog.recorder.engine import Recorder
 from fleetlog.recorder.service import RecorderService, ServiceOptions
 from fleetlog.storage.catalog import LogCatalog
+from fleetlog.transport.notify import Notifier, Watchdog
 from fleetlog.transport.queries import ZenohSession
 
 __all__ = ["load_config", "read_mission", "record"]
@@ -162,20 +165,33 @@ def record(
 
     Without a mission file it logs every variable of the vehicle into ./MOOSLog_<time>/ using
     an embedded Zenoh peer. Stop it with Ctrl-C (SIGINT) or SIGTERM: everything received is
-    written and the files are closed.
+    written and the files are closed. Behind a router (client mode) it records from its
+    first second whether or not the router is up, and joins it when it answers.
     """
     key_root = checked_root(root)
-    zopts = session_options(mode, connect, listen, config, no_multicast_scouting)
+    # A vehicle records whatever the network does: never wait for, nor give up on, a router.
+    zopts = dataclasses.replace(
+        session_options(mode, connect, listen, config, no_multicast_scouting), keep_trying=True
+    )
     cfg = load_config(mission, app_name)
     if vehicle is not None:
         checked_vehicle(vehicle, "--vehicle")
-    veh = vehicle or cfg.community or _default_vehicle()
+    machine_vehicle = settings().get("vehicle")
+    veh = vehicle or machine_vehicle or cfg.community or _default_vehicle()
+    if vehicle is None and machine_vehicle and cfg.community and cfg.community != machine_vehicle:
+        print(
+            f"fleetlog: warning: recording as vehicle {machine_vehicle!r} (this machine's"
+            f" settings), not as the mission's Community {cfg.community!r}; --vehicle chooses",
+            file=sys.stderr,
+        )
     mission_path = mission.resolve() if mission is not None else None
     dirs: list[Path] = []
     if mission_path is not None:
         dirs.append(mission_path.parent)
         dirs.extend(mission_path.parent / d for d in cfg.copy_file_dirs)
     dirs.extend(copy_dir or ())
+    notifier = Notifier()
+    watchdog = Watchdog(notifier)
     service = RecorderService(
         cfg,
         ServiceOptions(
@@ -185,10 +201,12 @@ def record(
             mission_path=mission_path,
             copy_dirs=tuple(dirs),
             attach=None if no_serve else _log_server(key_root, veh, cfg),
+            watchdog=watchdog.kick if watchdog.enabled else None,
         ),
     )
 
     def on_signal(signum: int, frame: object) -> None:
+        notifier.stopping("closing every file")
         service.stop()
         # A second signal ends a shutdown that hangs, as users expect of a second Ctrl-C.
         signal.signal(signum, signal.SIG_DFL)
@@ -213,8 +231,12 @@ def record(
             file=sys.stderr,
             flush=True,
         )
+        notifier.ready(f"recording vehicle {veh} into {where}")
 
-    view = service.run(on_ready=ready)
+    try:
+        view = service.run(on_ready=ready)
+    finally:
+        notifier.close()
     print(f"fleetlog: stopped: {view.summary()}", file=sys.stderr)
     for err in view.publish_errors[:3]:
         print(f"fleetlog: warning: {err}", file=sys.stderr)

@@ -85,6 +85,9 @@ class ServiceOptions:
     #: returns the function that stops it (the CLI attaches the log server here, so the
     #: recorder layer does not depend on the query layer)
     attach: Callable[[ZenohSession, Recorder], Callable[[], None]] | None = None
+    #: called from the drain loop at every tick (``time.monotonic()``): feeds systemd's
+    #: watchdog, so that a hung drain loop gets the service restarted, not only a dead one
+    watchdog: Callable[[float], None] | None = None
     #: once started, collect and then freeze the process's objects out of the cyclic GC
     #: (``gc.freeze``), so that a full collection does not walk the start-up objects: it
     #: took 5-8 ms of CPU in a started recorder, a third of the 20 ms flush bound, and
@@ -280,7 +283,8 @@ class RecorderService:
             RecorderError: another recorder of this vehicle is up.
         """
         vehicle = self.options.vehicle
-        up = live_vehicles(session, self.options.root, ("recorder",), timeout=1.0)
+        # Asked on this vehicle's own key: the security profile lets a vehicle ask no other.
+        up = live_vehicles(session, self.options.root, ("recorder",), timeout=1.0, vehicle=vehicle)
         if vehicle in up:
             msg = (
                 f"a recorder of vehicle {vehicle!r} is already running "
@@ -422,6 +426,7 @@ class RecorderService:
         mask = _CHECK_EVERY - 1
         seen = self._misses.seen
         commands = recorder.commands
+        watchdog = self.options.watchdog
         while not stop.is_set():
             got = 0
             for sub in self._subscribers:
@@ -460,6 +465,8 @@ class RecorderService:
                 self._read_beats()
                 self._fold_misses(recorder, decoder)
                 recorder.tick()
+                if watchdog is not None:
+                    watchdog(now)
             if got:
                 idle = 0
             else:
