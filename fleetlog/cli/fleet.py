@@ -12,6 +12,7 @@ from fleetlog.cli.app import app
 from fleetlog.cli.options import Config, Connect, Listen, Mode, NoScouting, Root
 from fleetlog.cli.shore import open_client
 from fleetlog.cli.tables import console, fleet_table
+from fleetlog.errors import QueryError
 
 __all__ = ["fleet"]
 
@@ -32,7 +33,12 @@ def fleet(
     with open_client(root, mode, connect, listen, config, no_multicast_scouting) as client:
         vehicles = client.vehicles()
         latest = client.latest_all() if vehicles else {}
+        hint = client.nobody_hint() if not vehicles else ""
     if not vehicles:
+        if hint:
+            # Through a router, silence may be a refusal: an error, not an empty fleet.
+            msg = f"no vehicle answered{hint}"
+            raise QueryError(msg)
         print(
             "fleetlog: no vehicle is up (no recorder or serve token answered; check"
             " --connect / --mode)",

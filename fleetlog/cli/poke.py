@@ -23,7 +23,10 @@ from fleetlog.cli.options import (
     checked_vehicle,
     session_options,
 )
+from fleetlog.deploy.identity import publish_refusal, this_identity
 from fleetlog.errors import QueryError, UsageError
+from fleetlog.transport.services import refusal_hint
+from fleetlog.wire.keys import service_key, var_key
 
 __all__ = ["parse_assignment", "poke"]
 
@@ -108,7 +111,14 @@ def poke(
         checked_vehicle(vehicle, "--vehicle")
     key_root = checked_root(root)
     zopts = session_options(mode, connect, listen, config, no_multicast_scouting)
+    who = this_identity(zopts)
     with Vehicle(vehicle, source=source, options=zopts, root=key_root) as v:
+        if who is not None:
+            # The routers drop a refused put silently: refuse it here, where it can be said.
+            for name, _ in parsed:
+                refusal = publish_refusal(who, v.vehicle, name)
+                if refusal is not None:
+                    raise QueryError(refusal)
         for name, value in parsed:
             if not v.wait_for_subscriber(name, timeout=wait):
                 msg = f"nobody subscribes to {name} of vehicle {v.vehicle!r}; nothing was delivered"
@@ -122,4 +132,10 @@ def poke(
         if not v.confirm(timeout=wait):
             # No recorder answered; give plain subscribers a moment before the session closes.
             time.sleep(0.3)
+            status = service_key(key_root, v.vehicle, "status")
+            hint = refusal_hint(v.session, "put or the status query", status)
+            if hint:
+                keys = ", ".join(var_key(key_root, v.vehicle, name) for name, _ in parsed)
+                msg = f"no recorder of vehicle {v.vehicle!r} confirmed the put on {keys}{hint}"
+                raise QueryError(msg)
             print("fleetlog: warning: no recorder confirmed receipt", file=sys.stderr)

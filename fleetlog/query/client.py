@@ -24,7 +24,7 @@ from types import TracebackType
 from fleetlog.errors import FormatError, QueryError
 from fleetlog.moos.alog import BinaryRef, Entry, parse_binary_ref
 from fleetlog.transport.queries import PendingQuery, ZenohSession, start_query
-from fleetlog.transport.services import live_vehicles
+from fleetlog.transport.services import live_vehicles, refusal_hint
 from fleetlog.transport.session import SessionOptions, open_session
 from fleetlog.wire.keys import (
     DEFAULT_ROOT,
@@ -281,9 +281,10 @@ class FleetClient:
             up = sorted(self.vehicles())
         except Exception:  # the error is about the first failure, not this one
             up = []
+        key = selector.split("?")[0]
         if vehicle in up:
             msg = (
-                f"vehicle {vehicle!r} is up but nothing answered {selector.split('?')[0]!r}"
+                f"vehicle {vehicle!r} is up but nothing answered {key!r}"
                 " (a recorder that does not serve its logs, or the link dropped)"
             )
         elif up:
@@ -293,7 +294,12 @@ class FleetClient:
                 f"vehicle {vehicle!r} is not up, and no vehicle is (no fleetlog recorder or"
                 " serve token is reachable: check --connect / --mode)"
             )
-        return TransientQueryError(msg)
+        return TransientQueryError(msg + refusal_hint(self.zenoh, "query", key))
+
+    def nobody_hint(self) -> str:
+        """What to add to "no vehicle is up" when a router may have refused the question."""
+        selector = fleet_service_selector(self.root, RECORDER_TOKEN)
+        return refusal_hint(self.zenoh, "liveliness query", selector)
 
     def require(self, vehicle: str) -> None:
         """Check that a vehicle is up.

@@ -9,9 +9,9 @@ import zenoh
 
 from fleetlog.errors import FormatError, QueryError
 from fleetlog.transport.session import translate_zerror
-from fleetlog.wire.keys import fleet_service_selector, parse_service_key
+from fleetlog.wire.keys import fleet_service_selector, parse_service_key, service_key
 
-__all__ = ["get_json", "get_replies", "live_vehicles"]
+__all__ = ["get_json", "get_replies", "live_vehicles", "refusal_hint", "routers_connected"]
 
 
 def live_vehicles(
@@ -19,6 +19,7 @@ def live_vehicles(
     root: str,
     services: tuple[str, ...] = ("recorder",),
     timeout: float = 2.0,
+    vehicle: str | None = None,
 ) -> dict[str, set[str]]:
     """Return the vehicles whose liveliness tokens are up: ``{vehicle: {service, ...}}``.
 
@@ -27,10 +28,14 @@ def live_vehicles(
         root: the key root.
         services: which tokens count (``recorder``, ``serve``).
         timeout: how long to wait for the liveliness answers.
+        vehicle: ask about this vehicle only.
     """
     found: dict[str, set[str]] = {}
     for service in services:
-        selector = fleet_service_selector(root, service)
+        if vehicle is None:
+            selector = fleet_service_selector(root, service)
+        else:
+            selector = service_key(root, vehicle, service)
         with translate_zerror(f"liveliness query {selector!r}"):
             replies = session.liveliness().get(selector, timeout=timeout)
             for reply in replies:
@@ -93,3 +98,25 @@ def get_json(session: zenoh.Session, selector: str, *, timeout: float = 5.0) -> 
             msg = f"reply on {sample.key_expr} is not JSON: {err}"
             raise QueryError(msg) from err
     return out
+
+
+def routers_connected(session: zenoh.Session) -> int:
+    """How many routers the session is connected to now (0 for a peer on its own)."""
+    try:
+        return len(session.info.routers_zid())
+    except (zenoh.ZError, RuntimeError):
+        return 0
+
+
+def refusal_hint(session: zenoh.Session, action: str, key: str) -> str:
+    """The clause that says a silence may be an access-control refusal, if a router is there.
+
+    Zenoh's routers drop what access control refuses without a word, so "nothing answered"
+    through a router may mean "not allowed": say which key and which action.
+    """
+    if not routers_connected(session):
+        return ""
+    return (
+        f"; a router is connected, so its access control may have refused the {action} on"
+        f" {key!r} (check that this machine's certificate has a role that may)"
+    )
