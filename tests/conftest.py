@@ -9,6 +9,14 @@ import pytest
 from helpers import REFERENCE, free_port
 
 
+@pytest.fixture(autouse=True, scope="session")
+def _no_machine_configuration(tmp_path_factory: pytest.TempPathFactory) -> None:
+    """Tests never read this machine's /etc/fleetlog, ZENOH_CONFIG or FLEETLOG_SETTINGS."""
+    os.environ["FLEETLOG_ETC"] = str(tmp_path_factory.mktemp("etc") / "none")
+    os.environ.pop("ZENOH_CONFIG", None)
+    os.environ.pop("FLEETLOG_SETTINGS", None)
+
+
 @pytest.fixture
 def endpoint() -> str:
     """A fresh loopback endpoint for one test's Zenoh sessions."""

@@ -23,6 +23,7 @@ from fleetlog.cli.options import (
     checked_vehicle,
     session_options,
 )
+from fleetlog.cli.settings import settings
 from fleetlog.deploy.identity import publish_refusal, this_identity
 from fleetlog.errors import QueryError, UsageError
 from fleetlog.transport.services import refusal_hint
@@ -79,7 +80,8 @@ def poke(
             "--vehicle",
             "-v",
             metavar="NAME",
-            help="Vehicle to publish to [default: the one reachable recorder's].",
+            help="Vehicle to publish to [default: this machine's (settings), else the one"
+            " reachable recorder's].",
         ),
     ] = None,
     source: Annotated[
@@ -109,6 +111,7 @@ def poke(
     checked_seconds(wait, "--wait")
     if vehicle is not None:
         checked_vehicle(vehicle, "--vehicle")
+    vehicle = vehicle or settings().get("vehicle")
     key_root = checked_root(root)
     zopts = session_options(mode, connect, listen, config, no_multicast_scouting)
     who = this_identity(zopts)

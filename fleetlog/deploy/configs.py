@@ -182,7 +182,12 @@ def client_config(fleet: Fleet, machine_dir: str, cert: str, key: str, base: str
     else:
         target = fleet.shore.dial()
         notes["mode"] = "A client of the shore's router."
-    conf: dict[str, Any] = {"mode": "client", "connect": {"endpoints": [target]}}
+    conf: dict[str, Any] = {
+        "mode": "client",
+        "connect": {"endpoints": [target]},
+        "listen": {"endpoints": []},
+    }
+    notes["listen"] = "Nothing listens here, whatever mode a command chooses."
     common = _common(fleet, machine_dir, base, cert, key, listen=False)
     conf.update(common)
     header = (

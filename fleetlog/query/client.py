@@ -275,7 +275,7 @@ class FleetClient:
         """
         return live_vehicles(self.zenoh, self.root, (RECORDER_TOKEN, SERVE_TOKEN), timeout)
 
-    def no_answer(self, vehicle: str, selector: str) -> TransientQueryError:
+    def no_answer(self, vehicle: str, selector: str, action: str = "query") -> TransientQueryError:
         """Build the error for a query nobody answered, naming the vehicles that are up."""
         try:
             up = sorted(self.vehicles())
@@ -294,7 +294,7 @@ class FleetClient:
                 f"vehicle {vehicle!r} is not up, and no vehicle is (no fleetlog recorder or"
                 " serve token is reachable: check --connect / --mode)"
             )
-        return TransientQueryError(msg + refusal_hint(self.zenoh, "query", key))
+        return TransientQueryError(msg + refusal_hint(self.zenoh, action, key))
 
     def nobody_hint(self) -> str:
         """What to add to "no vehicle is up" when a router may have refused the question."""
@@ -308,7 +308,8 @@ class FleetClient:
             QueryError: it is not; the message names the vehicles that are.
         """
         if vehicle not in self.vehicles():
-            raise self.no_answer(vehicle, service_key(self.root, vehicle))
+            tokens = service_key(self.root, vehicle, RECORDER_TOKEN)
+            raise self.no_answer(vehicle, tokens, "liveliness query")
 
     # -- queries
 

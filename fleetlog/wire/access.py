@@ -253,7 +253,7 @@ KEY_RULES: tuple[KeyRule, ...] = (
     _rule(
         "@fleetlog/status",
         "<root>/V/@fleetlog/status",
-        vehicle={SV},
+        vehicle={SV, A},  # a vehicle app confirms delivery by asking its recorder
         operator={A},
         replay={A},
     ),

@@ -90,9 +90,10 @@ def verdict(identity: Identity, flow: Flow, message: str, key: str) -> bool:
     target = zenoh.KeyExpr(key)
     for rid in policy["rules"]:
         rule = rules[rid]
-        if flow.value in rule["flows"] and message in rule["messages"]:
-            if any(zenoh.KeyExpr(k).includes(target) for k in rule["key_exprs"]):
-                return True
+        if flow.value not in rule["flows"] or message not in rule["messages"]:
+            continue
+        if any(zenoh.KeyExpr(k).includes(target) for k in rule["key_exprs"]):
+            return True
     return False
 
 
@@ -135,7 +136,9 @@ def test_every_rule_names_every_role(rule: KeyRule) -> None:
 
 def test_a_rule_without_a_role_is_refused() -> None:
     with pytest.raises(FormatError, match="names no grant for router"):
-        KeyRule("var/**", "<root>/V/var/VAR", {r: frozenset() for r in Role if r is not Role.ROUTER})
+        KeyRule(
+            "var/**", "<root>/V/var/VAR", {r: frozenset() for r in Role if r is not Role.ROUTER}
+        )
 
 
 @pytest.mark.parametrize("wire_key", wire_keys())
@@ -203,12 +206,14 @@ def test_the_profile_survives_zenoh_pitfalls() -> None:
         # "any certificate" subjects, and names no public CA issues.
         assert set(subject) == {"id", "cert_common_names"}
         (cn,) = subject["cert_common_names"]
-        assert cn.startswith("fleetlog:") and "*" not in cn
+        assert cn.startswith("fleetlog:")
+        assert "*" not in cn
     for rule in ACL["rules"]:
         assert rule["permission"] == "allow"
         for key in rule["key_exprs"]:
             zenoh.KeyExpr(key)  # valid
-            assert key != f"{ROOT}/**" and not key.startswith("**")
+            assert key != f"{ROOT}/**"
+            assert not key.startswith("**")
 
 
 def test_the_configuration_loads_in_zenoh() -> None:
