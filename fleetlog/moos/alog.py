@@ -3,11 +3,9 @@ r"""The ``.alog`` text format: banner and entry lines, written and read back (MO
 Pure code: strings in, strings and :class:`Entry` objects out. The same line format serves the
 ``.xlog`` (§2.5); the banner serves the ``.slog``, ``.ylog`` and ``._moos`` too (§2.1).
 
-Reading follows §12's reader rule: an entry line starts with a digit (or ``-`` and a digit, for
-the negative times real pLogger writes); its value is everything after the source field's
-padding and its one separator space, minus exactly one terminator space, so leading spaces,
-empty strings, ``\r`` and multi-line values survive. Lines that follow an entry and do not
-start like an entry or with ``%`` continue its value.
+Reading entries back (§12's reader rule) is the columnar reader's work,
+:mod:`fleetlog.storage.columnar`; what stays here is the banner and the binary reference,
+which are parsed one at a time.
 """
 
 from __future__ import annotations
@@ -15,27 +13,24 @@ from __future__ import annotations
 import enum
 import math
 import re
-from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 
 from fleetlog.errors import FormatError
 
 __all__ = [
     "BANNER_RULE",
+    "DATATYPE_MARKING",
     "Banner",
     "BinaryRef",
     "Entry",
-    "EntryParser",
     "LineFormatter",
     "Variant",
-    "classify_value",
     "format_banner",
     "format_binary_ref",
     "format_double",
     "format_entry",
     "format_logstart",
     "format_time",
-    "iter_entries",
     "parse_banner",
     "parse_binary_ref",
     "source_field",
@@ -321,9 +316,7 @@ class LineFormatter:
 # --------------------------------------------------------------------------------------------
 # Reading
 
-_DOUBLE_RE = re.compile(r"-?[0-9]+(?:\.[0-9]+)?|-?nan|-?inf")
 _BINARY_RE = re.compile(r"<MOOS_BINARY>File=(.*),Offset=(-?[0-9]+),Bytes=([0-9]+)</MOOS_BINARY>")
-_TIME_RE = re.compile(r"-?[0-9]+(?:\.[0-9]*)?(?:[eE][-+]?[0-9]+)?")
 
 
 def parse_binary_ref(text: str) -> BinaryRef | None:
@@ -332,174 +325,6 @@ def parse_binary_ref(text: str) -> BinaryRef | None:
     if match is None:
         return None
     return BinaryRef(match.group(1), int(match.group(2)), int(match.group(3)))
-
-
-def classify_value(
-    text: str, *, mark_data_type: bool = False, binary: bool = True
-) -> tuple[float | str | BinaryRef, str]:
-    """Decide a value's type from its text as written; return ``(value, clean_text)``.
-
-    With MarkDataType the ``D:``/``S:`` marker decides. Without it, a value that is exactly a
-    double as pLogger pads it (``%.Nf`` left-justified to 12, or wider with no padding) is a
-    double and anything else a string: ``"0.5"`` unpadded is a string, because pLogger would
-    have written the double 0.5 as ``"0.5"`` plus 9 spaces. A ``<MOOS_BINARY>`` tag is binary
-    either way, unless ``binary`` is False.
-
-    Args:
-        text: the value part of an entry without its terminator space.
-        mark_data_type: the file was written with MarkDataType (a ``D:``/``S:`` marker).
-        binary: whether the text may be a binary reference. Pass False when the value came
-            with a terminator space: pLogger writes binary references without one, so such a
-            value is a string that merely looks like a reference.
-    """
-    if binary and text.startswith(_BINARY_OPEN):
-        ref = parse_binary_ref(text)
-        if ref is not None:
-            return ref, text
-    if mark_data_type:
-        if text.startswith("D:"):
-            body = text[2:].rstrip(" ")
-            if _DOUBLE_RE.fullmatch(body):
-                return float(body), body
-        elif text.startswith("S:"):
-            return text[2:], text[2:]
-        return text, text
-    body = text.rstrip(" ")
-    if body and len(text) == max(12, len(body)) and _DOUBLE_RE.fullmatch(body):
-        return float(body), body
-    return text, text
-
-
-def _entry_fields(line: str) -> tuple[str, str, str, str] | None:
-    """Split an entry's first line into time, key, source and raw value (with terminator).
-
-    Follows the writer's columns: each field is left-justified to its width (15, 20, 15) or
-    wider, then one separator space. Returns None when the line is not shaped like an entry.
-    """
-    sp = line.find(" ")
-    if sp <= 0:
-        return None
-    time_text = line[:sp]
-    if not _TIME_RE.fullmatch(time_text):
-        return None
-    pos = max(15, sp) + 1
-    if line[sp:pos].strip(" "):
-        return None
-    key_end = line.find(" ", pos)
-    if key_end <= pos:
-        return None
-    key = line[pos:key_end]
-    pos = max(pos + 20, key_end) + 1
-    if line[key_end:pos].strip(" "):
-        return None
-    src_end = line.find(" ", pos)
-    if src_end < 0:
-        return None
-    source = line[pos:src_end]
-    vpos = max(pos + 15, src_end) + 1
-    if line[src_end:vpos].strip(" ") or len(line) < vpos:
-        return None
-    return time_text, key, source, line[vpos:]
-
-
-def _is_ascii_digit(c: str) -> bool:
-    return "0" <= c <= "9"
-
-
-def _starts_entry(line: str) -> bool:
-    # ASCII digits only: str.isdigit() also accepts "²" or "٣", which never start pLogger's
-    # time column but may start a continuation line.
-    if not line:
-        return False
-    c = line[0]
-    return _is_ascii_digit(c) or (c == "-" and len(line) > 1 and _is_ascii_digit(line[1]))
-
-
-class EntryParser:
-    r"""Incremental alog entry parser: feed lines, get entries; keeps multi-line values whole.
-
-    Lines are given without their ``\n``. Banner and comment lines (``%``) are skipped. The
-    parser is strict only where a real file cannot differ: a line that starts like an entry
-    but is not shaped like one continues the previous value, as a continuation line would.
-
-    Attributes:
-        mark_data_type: read ``D:``/``S:`` markers (set from the banner by :func:`iter_entries`).
-        orphans: continuation lines seen before any entry (a file cut at its head).
-        dropped: last entries dropped by :meth:`close` because they were cut short.
-    """
-
-    def __init__(self, *, mark_data_type: bool = False) -> None:
-        self.mark_data_type = mark_data_type
-        self.orphans = 0
-        self.dropped = 0
-        self._head: tuple[float, str, str, int] | None = None
-        self._parts: list[str] = []
-
-    def feed(self, line: str, lineno: int = 0) -> Entry | None:
-        """Take the next line; return the entry it completes, if any."""
-        if line.startswith("%"):
-            return self._finish()
-        if _starts_entry(line):
-            fields = _entry_fields(line)
-            if fields is not None:
-                done = self._finish()
-                time_text, key, source, raw = fields
-                self._head = (float(time_text), key, source, lineno)
-                self._parts = [raw]
-                return done
-        if self._head is None:
-            self.orphans += 1
-            return None
-        self._parts.append(line)
-        return None
-
-    def close(self, *, complete: bool = True) -> Entry | None:
-        r"""Finish the last entry.
-
-        pLogger ends every entry with its terminator (a space, or the binary tag's close), so
-        a last entry without one was cut inside a multi-line value (``"hello"`` of
-        ``"hello\ndebug"``): it is dropped like a cut line, and counted in :attr:`dropped`.
-
-        Args:
-            complete: False when the last line had no ``\n`` (a truncated file); its entry is
-                then dropped, because its value may be cut short.
-        """
-        if self._head is None:
-            return None
-        if not complete or not self._terminated():
-            self._head = None
-            self._parts = []
-            self.dropped += 1
-            return None
-        return self._finish()
-
-    def _terminated(self) -> bool:
-        last = self._parts[-1]
-        return last.endswith(" ") or (
-            self._parts[0].startswith(_BINARY_OPEN) and last.endswith(_BINARY_CLOSE)
-        )
-
-    def _finish(self) -> Entry | None:
-        head = self._head
-        if head is None:
-            return None
-        self._head = None
-        raw = "\n".join(self._parts)
-        self._parts = []
-        if raw.endswith(" "):
-            # The terminator space: a string or a double, never a binary reference.
-            text = raw[:-1]
-            terminated = True
-        else:
-            # A binary reference, or (not what pLogger writes) a value without its
-            # terminator space, kept as it stands.
-            text = raw
-            terminated = False
-        value, clean = classify_value(
-            text, mark_data_type=self.mark_data_type, binary=not terminated
-        )
-        offset, key, source, lineno = head
-        return Entry(offset, key, source, value, clean, lineno)
 
 
 def parse_banner(lines: list[str], path: str | None = None) -> Banner:
@@ -549,48 +374,3 @@ def parse_banner(lines: list[str], path: str | None = None) -> Banner:
             raise FormatError(msg, path, index)
     msg = "banner is not closed by a line of 59 '%'"
     raise FormatError(msg, path, len(lines))
-
-
-def iter_entries(
-    lines: Iterable[str], *, mark_data_type: bool = False, parser: EntryParser | None = None
-) -> Iterator[Entry]:
-    r"""Yield the entries of alog text given as ``\n``-terminated lines.
-
-    A last line without ``\n`` is treated as truncated: its entry is dropped. The banner's
-    ``DATATYPE MARKING ON`` line switches marker reading on.
-
-    A reader that knows its text was cut exactly after a ``\n`` (a compressed stream that
-    ended early) passes an empty last line: the entry before it may be missing continuation
-    lines, so it is dropped too. Without that mark a cut at a line boundary inside a
-    multi-line value is indistinguishable from a whole file.
-
-    Args:
-        lines: the text's lines, each ending in ``\n`` except perhaps the last.
-        mark_data_type: read ``D:``/``S:`` markers from the start.
-        parser: the parser to use, for callers that want its ``orphans`` and ``dropped``
-            counts afterwards; a new one by default.
-    """
-    if parser is None:
-        parser = EntryParser(mark_data_type=mark_data_type)
-    elif mark_data_type:
-        parser.mark_data_type = True
-    complete = True
-    for lineno, line in enumerate(lines, start=1):
-        if line.endswith("\n"):
-            body = line[:-1]
-        else:
-            complete = False
-            body = line
-        if body == DATATYPE_MARKING:
-            parser.mark_data_type = True
-        if not complete:
-            # A cut line that starts a new entry (or a comment) proves the entry before it
-            # was whole; a cut continuation line leaves that entry's value unknown.
-            complete = body.startswith("%") or _starts_entry(body)
-            break
-        entry = parser.feed(body, lineno)
-        if entry is not None:
-            yield entry
-    last = parser.close(complete=complete)
-    if last is not None:
-        yield last

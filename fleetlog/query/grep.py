@@ -4,24 +4,29 @@ The filter (:class:`EntryFilter`) is what a :class:`~fleetlog.wire.query.GrepReq
 variables by MOOS glob, sources by MOOS glob (on the whole source column or on the process
 name before ``:``/``@``, so ``pHelmIvP`` also finds ``pHelmIvP:HELM_VAR_INIT``), a time
 window in seconds since LOGSTART (absolute bounds are converted with the file's LOGSTART),
-and a limit. Verdicts are cached per variable and per source, because both repeat on
-nearly every line.
+and a limit.
 
-Entries are read with :class:`~fleetlog.storage.readers.AlogReader` (``errors="skip"``: a
-field log with a garbled line still answers, and the end record counts what was skipped),
-in file order, as the low-level reader keeps them.
+Entries are read with the columnar reader (:class:`~fleetlog.storage.columnar.AlogReader`,
+``errors="skip"``: a field log with a garbled line still answers, and the end record counts
+what was skipped), in file order, as the low-level reader keeps them. The filter runs before
+values are typed: globs are matched once per distinct variable and source (a few hundred in a
+log of millions of lines) with the linear-time matcher, and rows are kept by set membership
+in Rust. The recorder's process serves greps, so blocks are small (:data:`GREP_BLOCK`): no
+step holds the GIL for long and recording never waits on a grep.
 """
 
 from __future__ import annotations
 
+import json
 import threading
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from fleetlog.errors import StorageError
-from fleetlog.moos.alog import BinaryRef, Entry, split_source
+from fleetlog.moos.alog import split_source
 from fleetlog.moos.patterns import MoosGlob
-from fleetlog.storage.readers import AlogReader
+from fleetlog.storage.columnar import AlogReader, Batch
 from fleetlog.wire.query import (
     REPLY_TARGET,
     GrepEnd,
@@ -31,9 +36,17 @@ from fleetlog.wire.query import (
     encode_grep_line,
 )
 
-__all__ = ["EntryFilter", "run_grep"]
+if TYPE_CHECKING:
+    import polars as pl
 
-_CANCEL_EVERY = 4096
+__all__ = ["GREP_BLOCK", "EntryFilter", "run_grep"]
+
+#: Decompressed bytes parsed per step in the recorder's process (about 13k lines).
+GREP_BLOCK = 1 << 20
+#: Distinct names whose verdict is remembered; past that the cache starts over.
+_MAX_VERDICTS = 65536
+_KIND = {"double": "d", "string": "s", "binary": "b"}
+_COLUMNS = ("line", "offset", "var", "source", "type", "text")
 
 
 class EntryFilter:
@@ -55,38 +68,62 @@ class EntryFilter:
         self._var_verdicts: dict[str, bool] = {}
         self._source_verdicts: dict[str, bool] = {}
 
-    def _var_ok(self, key: str) -> bool:
+    def var_ok(self, key: str) -> bool:
+        """Return True if a variable name is wanted."""
         verdict = self._var_verdicts.get(key)
         if verdict is None:
             verdict = not self._vars or any(g.matches(key) for g in self._vars)
-            if len(self._var_verdicts) < 65536:
-                self._var_verdicts[key] = verdict
+            if len(self._var_verdicts) >= _MAX_VERDICTS:
+                self._var_verdicts.clear()
+            self._var_verdicts[key] = verdict
         return verdict
 
-    def _source_ok(self, source: str) -> bool:
+    def source_ok(self, source: str) -> bool:
+        """Return True if a source column is wanted (whole, or its process name)."""
         verdict = self._source_verdicts.get(source)
         if verdict is None:
             process = split_source(source)[0]
             verdict = not self._sources or any(
                 g.matches(source) or g.matches(process) for g in self._sources
             )
-            if len(self._source_verdicts) < 65536:
-                self._source_verdicts[source] = verdict
+            if len(self._source_verdicts) >= _MAX_VERDICTS:
+                self._source_verdicts.clear()
+            self._source_verdicts[source] = verdict
         return verdict
 
-    def __call__(self, entry: Entry) -> bool:
-        """Return True if the entry is wanted."""
-        if self.low is not None and entry.offset < self.low:
-            return False
-        if self.high is not None and entry.offset > self.high:
-            return False
-        return self._var_ok(entry.key) and self._source_ok(entry.source)
+    def __call__(self, heads: pl.DataFrame) -> pl.Series:
+        """Return which rows of a block's entries are wanted (a ``where`` for the reader)."""
+        keep = heads["offset"].is_not_null()
+        if self.low is not None:
+            keep = keep & (heads["offset"] >= self.low)
+        if self.high is not None:
+            keep = keep & (heads["offset"] <= self.high)
+        if self._vars:
+            names = [k for k in heads["var"].unique().to_list() if self.var_ok(k)]
+            keep = keep & heads["var"].is_in(names)
+        if self._sources:
+            names = [s for s in heads["source"].unique().to_list() if self.source_ok(s)]
+            keep = keep & heads["source"].is_in(names)
+        return keep
 
 
-def _kind(entry: Entry) -> str:
-    if isinstance(entry.value, BinaryRef):
-        return "b"
-    return "d" if isinstance(entry.value, float) else "s"
+def _record_lines(batch: Batch) -> list[bytes]:
+    """Encode a batch of matches as grep record lines (what encode_grep_line writes)."""
+    if not batch.exact:
+        kinds = batch.frame["type"].to_list()
+        return [
+            encode_grep_line(GrepRecord(e.offset, e.key, e.source, _KIND[kind], e.text, e.lineno))
+            for e, kind in zip(batch.entries(), kinds, strict=True)
+        ]
+    frame = batch.frame
+    columns = [
+        frame[name].to_list() for name in ("offset", "var", "source", "type", "text", "line")
+    ]
+    dump = json.JSONEncoder(separators=(",", ":")).encode
+    return [
+        dump([offset, key, source, _KIND[kind], text, line]).encode("ascii") + b"\n"
+        for offset, key, source, kind, text, line in zip(*columns, strict=True)
+    ]
 
 
 def run_grep(
@@ -118,30 +155,27 @@ def run_grep(
     keep = EntryFilter(request, header.logstart)
     chunk = [encode_grep_line(header)]
     size = len(chunk[0])
-    matched = scanned = 0
+    matched = 0
     truncated = False
-    with AlogReader(path, errors="skip") as reader:
-        for entry in reader.entries():
-            scanned += 1
-            if cancel is not None and not scanned % _CANCEL_EVERY and cancel.is_set():
+    with AlogReader(path, errors="skip", block_size=GREP_BLOCK) as reader:
+        for batch in reader.frames(_COLUMNS, where=keep):
+            if cancel is not None and cancel.is_set():
                 msg = "the grep was cancelled (the server is closing)"
                 raise StorageError(msg)
-            if not keep(entry):
-                continue
-            if matched >= request.limit:
+            room = request.limit - matched
+            if batch.height > room:
+                batch = batch.head(room)
                 truncated = True
+            for line in _record_lines(batch):
+                chunk.append(line)
+                size += len(line)
+                if size >= REPLY_TARGET:
+                    emit(b"".join(chunk))
+                    chunk, size = [], 0
+            matched += batch.height
+            if truncated:
                 break
-            matched += 1
-            line = encode_grep_line(
-                GrepRecord(
-                    entry.offset, entry.key, entry.source, _kind(entry), entry.text, entry.lineno
-                )
-            )
-            chunk.append(line)
-            size += len(line)
-            if size >= REPLY_TARGET:
-                emit(b"".join(chunk))
-                chunk, size = [], 0
+        scanned = reader.scanned
         end = GrepEnd(matched, scanned, truncated, reader.skipped, reader.truncated)
     chunk.append(encode_grep_line(end))
     emit(b"".join(chunk))

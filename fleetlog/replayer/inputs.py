@@ -17,18 +17,17 @@ end time of a plain alog comes from its last 64 KiB.
 
 from __future__ import annotations
 
-import io
 import itertools
 import os
 import re
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import cast
 
 from fleetlog.errors import FormatError, ReplayError, StorageError
-from fleetlog.moos.alog import BANNER_RULE, iter_entries
+from fleetlog.moos.alog import BANNER_RULE
 from fleetlog.moos.mission import parse_mission
+from fleetlog.storage.columnar import read_tail
 from fleetlog.storage.readers import AlogReader, Errors, find_alog, open_text
 
 __all__ = [
@@ -181,30 +180,13 @@ def detect_vehicle(reader: AlogReader) -> tuple[str, str] | None:
 def _tail_end(reader: AlogReader) -> float | None:
     """Return LOGSTART + the largest offset among the last 64 KiB of a plain alog."""
     logstart = reader.logstart
-    if logstart is None:
+    if logstart is None or reader.compression:
         return None
     try:
-        with open_text(reader.path) as text:
-            if text.compression:
-                return None
-            raw = cast("io.BufferedIOBase", text.buffer)
-            size = raw.seek(0, os.SEEK_END)
-            start = max(0, size - TAIL_BYTES)
-            raw.seek(start)
-            data = raw.read()
-    except (StorageError, OSError):
+        offsets = read_tail(reader.path, TAIL_BYTES)["offset"]
+    except StorageError:
         return None
-    if start > 0:
-        cut = data.find(b"\n")
-        data = data[cut + 1 :] if cut >= 0 else b""
-    # Split at "\n" only, as every alog reader does: splitlines() would also cut values at
-    # "\r", "\x0b", "\x85", "\u2028" and the like, which pLogger writes verbatim.
-    parts = data.decode("utf-8", "surrogateescape").split("\n")
-    lines = [part + "\n" for part in parts[:-1]]
-    if parts[-1]:
-        lines.append(parts[-1])
-    offsets = [entry.offset for entry in iter_entries(lines)]
-    return logstart + max(offsets) if offsets else None
+    return logstart + float(offsets.max()) if offsets.len() else None  # type: ignore[arg-type]
 
 
 def _alog_of(spec: str) -> Path:

@@ -15,6 +15,7 @@ import re
 from pathlib import Path
 
 import pytest
+from alog_oracle import EntryParser, classify_value, iter_entries
 from helpers import REFERENCE
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
@@ -25,17 +26,14 @@ from fleetlog.moos.alog import (
     Banner,
     BinaryRef,
     Entry,
-    EntryParser,
     LineFormatter,
     Variant,
-    classify_value,
     format_banner,
     format_binary_ref,
     format_double,
     format_entry,
     format_logstart,
     format_time,
-    iter_entries,
     parse_banner,
     parse_binary_ref,
     source_field,

@@ -6,12 +6,13 @@ import gzip
 from pathlib import Path
 
 import pytest
+from alog_oracle import iter_entries
 from helpers import REFERENCE
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fleetlog.errors import FormatError
-from fleetlog.moos.alog import BinaryRef, Entry, LineFormatter, Variant, iter_entries
+from fleetlog.moos.alog import BinaryRef, Entry, LineFormatter, Variant
 from fleetlog.moos.blog import LOST_OFFSET, BlogRecord, format_blog_record, payload_at
 
 BLOGS = sorted(REFERENCE.rglob("*.blog"))

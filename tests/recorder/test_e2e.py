@@ -23,10 +23,11 @@ from pathlib import Path
 
 import pytest
 import zstandard
+from alog_oracle import iter_entries
 from helpers import Proc, free_port, run_cli
 
 from fleetlog.api import Vehicle
-from fleetlog.moos.alog import BANNER_RULE, BinaryRef, Entry, iter_entries
+from fleetlog.moos.alog import BANNER_RULE, BinaryRef, Entry
 from fleetlog.moos.blog import payload_at
 from fleetlog.moos.slog import SlogFile, parse_slog
 from fleetlog.moos.ylog import YlogFile, parse_ylog

@@ -22,9 +22,10 @@ from pathlib import Path
 
 import pytest
 import zstandard
+from alog_oracle import iter_entries
 
 from fleetlog.errors import TransportError
-from fleetlog.moos.alog import BinaryRef, Entry, Variant, format_banner, iter_entries
+from fleetlog.moos.alog import BinaryRef, Entry, Variant, format_banner
 from fleetlog.moos.blog import payload_at
 from fleetlog.moos.mission import LoggerConfig, parse_mission
 from fleetlog.moos.naming import ctime_text, session_root

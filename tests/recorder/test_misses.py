@@ -20,9 +20,9 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from alog_oracle import iter_entries
 from helpers import free_port
 
-from fleetlog.moos.alog import iter_entries
 from fleetlog.moos.mission import LoggerConfig
 from fleetlog.recorder import service as service_module
 from fleetlog.recorder.engine import Recorder
