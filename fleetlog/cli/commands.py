@@ -12,6 +12,7 @@ from fleetlog.cli import (
     router,
     serve,
     sessions,
+    tools,
 )
 
 __all__ = [
@@ -26,4 +27,5 @@ __all__ = [
     "router",
     "serve",
     "sessions",
+    "tools",
 ]

@@ -32,6 +32,7 @@ from fleetlog.query.server import LogServer
 from fleetlog.recorder.engine import Recorder
 from fleetlog.recorder.service import RecorderService, ServiceOptions
 from fleetlog.storage.catalog import LogCatalog
+from fleetlog.storage.columnar import limit_threads
 from fleetlog.transport.notify import Notifier, Watchdog
 from fleetlog.transport.queries import ZenohSession
 
@@ -168,6 +169,9 @@ def record(
     written and the files are closed. Behind a router (client mode) it records from its
     first second whether or not the router is up, and joins it when it answers.
     """
+    # Greps and listings in this process parse logs with polars: one thread for them, so that
+    # analysis never takes the cores the recorder's drain thread needs (before polars loads).
+    limit_threads(1)
     key_root = checked_root(root)
     # A vehicle records whatever the network does: never wait for, nor give up on, a router.
     zopts = dataclasses.replace(

@@ -21,12 +21,10 @@ import json
 import threading
 from collections.abc import Callable
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 from fleetlog.errors import StorageError
-from fleetlog.moos.alog import split_source
-from fleetlog.moos.patterns import MoosGlob
 from fleetlog.storage.columnar import AlogReader, Batch
+from fleetlog.storage.select import Selection
 from fleetlog.wire.query import (
     REPLY_TARGET,
     GrepEnd,
@@ -36,21 +34,16 @@ from fleetlog.wire.query import (
     encode_grep_line,
 )
 
-if TYPE_CHECKING:
-    import polars as pl
-
 __all__ = ["GREP_BLOCK", "EntryFilter", "run_grep"]
 
 #: Decompressed bytes parsed per step in the recorder's process (about 13k lines).
 GREP_BLOCK = 1 << 20
-#: Distinct names whose verdict is remembered; past that the cache starts over.
-_MAX_VERDICTS = 65536
 _KIND = {"double": "d", "string": "s", "binary": "b"}
 _COLUMNS = ("line", "offset", "var", "source", "type", "text")
 
 
-class EntryFilter:
-    """Decides which entries a grep request keeps.
+class EntryFilter(Selection):
+    """Decides which entries a grep request keeps (a :class:`Selection` built from it).
 
     Args:
         request: the request.
@@ -61,50 +54,9 @@ class EntryFilter:
     """
 
     def __init__(self, request: GrepRequest, logstart: float | None) -> None:
-        self._vars = [MoosGlob(p) for p in request.variables]
-        self._sources = [MoosGlob(p) for p in request.sources]
-        self.low = request.start.offset(logstart) if request.start else None
-        self.high = request.end.offset(logstart) if request.end else None
-        self._var_verdicts: dict[str, bool] = {}
-        self._source_verdicts: dict[str, bool] = {}
-
-    def var_ok(self, key: str) -> bool:
-        """Return True if a variable name is wanted."""
-        verdict = self._var_verdicts.get(key)
-        if verdict is None:
-            verdict = not self._vars or any(g.matches(key) for g in self._vars)
-            if len(self._var_verdicts) >= _MAX_VERDICTS:
-                self._var_verdicts.clear()
-            self._var_verdicts[key] = verdict
-        return verdict
-
-    def source_ok(self, source: str) -> bool:
-        """Return True if a source column is wanted (whole, or its process name)."""
-        verdict = self._source_verdicts.get(source)
-        if verdict is None:
-            process = split_source(source)[0]
-            verdict = not self._sources or any(
-                g.matches(source) or g.matches(process) for g in self._sources
-            )
-            if len(self._source_verdicts) >= _MAX_VERDICTS:
-                self._source_verdicts.clear()
-            self._source_verdicts[source] = verdict
-        return verdict
-
-    def __call__(self, heads: pl.DataFrame) -> pl.Series:
-        """Return which rows of a block's entries are wanted (a ``where`` for the reader)."""
-        keep = heads["offset"].is_not_null()
-        if self.low is not None:
-            keep = keep & (heads["offset"] >= self.low)
-        if self.high is not None:
-            keep = keep & (heads["offset"] <= self.high)
-        if self._vars:
-            names = [k for k in heads["var"].unique().to_list() if self.var_ok(k)]
-            keep = keep & heads["var"].is_in(names)
-        if self._sources:
-            names = [s for s in heads["source"].unique().to_list() if self.source_ok(s)]
-            keep = keep & heads["source"].is_in(names)
-        return keep
+        low = request.start.offset(logstart) if request.start else None
+        high = request.end.offset(logstart) if request.end else None
+        super().__init__(request.variables, request.sources, low, high)
 
 
 def _record_lines(batch: Batch) -> list[bytes]:

@@ -182,6 +182,15 @@ class Batch:
         """Yield the batch's rows as exact :class:`Entry` objects."""
         return _to_entries(self._full, self.exact)
 
+    def layout(self) -> pl.DataFrame:
+        """Return where each entry's key, source and value start in its first line.
+
+        Columns ``kpos``, ``spos`` and ``vpos``: character positions in the entry's text
+        (``raw`` decoded as UTF-8 with ``surrogateescape``), for tools that rewrite a column
+        and keep the rest of the line's bytes (merge).
+        """
+        return self._full.select("kpos", "spos", "vpos")
+
     def head(self, rows: int) -> Batch:
         """Return the first ``rows`` entries."""
         return Batch(self.frame.head(rows), self.exact, self._full.head(rows))
@@ -310,6 +319,14 @@ class AlogReader:
     def logstart(self) -> float | None:
         """The banner's LOGSTART, or None without a usable banner."""
         return None if self.banner is None else self.banner.logstart
+
+    @property
+    def banner_bytes(self) -> bytes:
+        """The banner exactly as written, newlines included (empty without a usable one)."""
+        if self.banner is None:
+            return b""
+        lines = self._head.split(b"\n")[: self.banner.lines]
+        return b"\n".join(lines) + b"\n"
 
     @property
     def compression(self) -> str:
@@ -817,19 +834,15 @@ def _parse_block(
     )
     std_mask = parsed["std"]
     heads = parsed.filter(std_mask).drop("std")
-    positions = block is not None  # kept to give exact values back (see _to_entries)
-    if positions:
-        heads = heads.with_columns(
-            kpos=pl.lit(16, pl.Int32), spos=pl.lit(37, pl.Int32), vpos=pl.lit(53, pl.Int32)
-        )
+    heads = heads.with_columns(
+        kpos=pl.lit(16, pl.Int32), spos=pl.lit(37, pl.Int32), vpos=pl.lit(53, pl.Int32)
+    )
     rest = lines.filter(~std_mask)
     general_idx = None
     if rest.height:
         candidates = rest.filter(line.str.contains(r"^-?[0-9]"))
         if candidates.height:
             general = _general(pl, candidates)
-            if not positions:
-                general = general.drop("kpos", "spos", "vpos")
             if general.height:
                 general_idx = general["idx"]
                 heads = heads.merge_sorted(general, key="idx") if heads.height else general

@@ -1,0 +1,178 @@
+"""The columnar reader against the line parser it replaced (tests/alog_oracle.py).
+
+Generated logs hold every shape §12 names: fields wider than their columns, empty sources
+and values, multi-line values, MarkDataType switched on mid-file, binary references and
+strings that look like them, doubles padded and not, stray lines, comments, bytes that are
+not UTF-8, and cut tails. Each is read by both readers, block by block at a small block size
+so that entries straddle block boundaries, and must give the same entries, counts and flags.
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import pytest
+from alog_oracle import AlogReader as OracleReader
+from helpers import REFERENCE
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from fleetlog.errors import FormatError, UsageError
+from fleetlog.moos.alog import BANNER_RULE, Entry, format_banner
+from fleetlog.storage.columnar import SCHEMA, AlogReader, read_tail
+
+BANNER = format_banner("./g/g.alog", 1750334690.048564, "Thu Jan  1 00:00:00 1970")
+
+_name = st.text(st.sampled_from("ABXYZ_09é"), min_size=1, max_size=24)
+_source = st.text(st.sampled_from("pHelm:IvP@ab_9"), min_size=0, max_size=20)
+_time = st.sampled_from(["0.5", "12.25000", "-3.5", "1e3", "100000000000000.1", "7", "1."])
+_value = st.one_of(
+    st.sampled_from(
+        [
+            "1.50000     ",
+            "-0.00000    ",
+            "123456789.12346",
+            "0.5",
+            "nan         ",
+            "D:2.00000      ",
+            "S:true",
+            "S:",
+            "D:x",
+            "<MOOS_BINARY>File=g.blog,Offset=53,Bytes=16</MOOS_BINARY>",
+            "",
+            "  lead",
+            "a\r",
+        ]
+    ),
+    st.text(st.sampled_from("ab =,\n%1 -\x00\u00e9"), max_size=30),
+)
+
+
+@st.composite
+def _line(draw: st.DrawFn) -> str:
+    kind = draw(st.integers(0, 9))
+    if kind == 0:
+        return draw(st.sampled_from(["% a comment", "%% DATATYPE MARKING ON", "stray", ""]))
+    time_text, key, source = draw(_time), draw(_name), draw(_source)
+    value = draw(_value)
+    end = "" if value.startswith("<MOOS") and draw(st.booleans()) else " "
+    return f"{time_text.ljust(15)} {key.ljust(20)} {source.ljust(15)} {value}{end}"
+
+
+@st.composite
+def alog_bytes(draw: st.DrawFn) -> bytes:
+    body = "\n".join(draw(st.lists(_line(), max_size=40)))
+    head = BANNER if draw(st.booleans()) else ""
+    data = (head + body + "\n").encode()
+    if draw(st.booleans()):
+        data = data.replace(b"a", b"\xff", draw(st.integers(0, 3)))
+    cut = draw(st.integers(0, 6))
+    return data[: len(data) - cut] if cut else data
+
+
+def _same(old: list[Entry], new: list[Entry]) -> None:
+    assert len(old) == len(new)
+    for a, b in zip(old, new, strict=True):
+        if isinstance(a.value, float) and math.isnan(a.value):
+            assert isinstance(b.value, float)
+            assert math.isnan(b.value)
+            assert (a.offset, a.key, a.source, a.text, a.lineno) == (
+                b.offset,
+                b.key,
+                b.source,
+                b.text,
+                b.lineno,
+            )
+        else:
+            assert a == b
+
+
+def _read(reader_type: type, path: Path, **kwargs: object) -> tuple[list[Entry], bool, int]:
+    with reader_type(path, errors="skip", **kwargs) as reader:
+        entries = list(reader.entries())
+        return entries, reader.truncated, reader.skipped
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(data=alog_bytes())
+def test_reads_generated_logs_as_the_line_parser_does(tmp_path: Path, data: bytes) -> None:
+    path = tmp_path / "g.alog"
+    path.write_bytes(data)
+    old = _read(OracleReader, path)
+    new = _read(AlogReader, path, block_size=1024)
+    _same(old[0], new[0])
+    # One fix: the line parser missed a cut last line among the first lines it read for
+    # the banner (a headless file of one unterminated line); a file that does not end in a
+    # newline was cut.
+    cut = bool(data) and not data.endswith(b"\n")
+    assert (old[1] or cut, old[2]) == new[1:]
+
+
+REFERENCE_LOGS = sorted(p for p in REFERENCE.rglob("*.alog*") if p.is_file())
+
+
+@pytest.mark.parametrize("path", REFERENCE_LOGS, ids=lambda p: p.name)
+def test_reads_recorded_logs_as_the_line_parser_does(path: Path) -> None:
+    old = _read(OracleReader, path)
+    new = _read(AlogReader, path, block_size=1024)
+    _same(old[0], new[0])
+    assert old[1:] == new[1:]
+    assert old[0], "a reference log without entries tests nothing"
+
+
+def test_batches_have_the_documented_columns() -> None:
+    path = REFERENCE_LOGS[0]
+    with AlogReader(path) as reader:
+        batch = next(reader.batches())
+        assert batch.columns == list(SCHEMA)
+        assert {str(t) for t in batch.dtypes} >= {"Int64", "Float64", "String", "Binary"}
+        logstart = reader.logstart
+        assert logstart is not None
+        for row in batch.iter_rows(named=True):
+            assert row["time"] == pytest.approx(logstart + row["offset"])
+            assert (row["double"] is not None) == (row["type"] == "double")
+        few = next(reader.batches(["var", "line"]))
+        assert few.columns == ["line", "var"]
+        with pytest.raises(UsageError, match="unknown column"):
+            next(reader.batches(["nope"]))
+
+
+def test_raw_is_the_entry_bytes_and_where_filters_before_typing(tmp_path: Path) -> None:
+    lines = [
+        "1.00000         A                    p               x\xff ",
+        "2.00000         B                    p               line1",
+        "line2 ",
+        "3.00000         A                    q               3.00000      ",
+    ]
+    path = tmp_path / "w.alog"
+    path.write_bytes(BANNER.encode("latin-1") + "\n".join(lines).encode("latin-1") + b"\n")
+    with AlogReader(path) as reader:
+        raws = [raw for b in reader.batches(["line", "var", "raw"]) for raw in b["raw"]]
+        assert raws == [
+            lines[0].encode("latin-1"),
+            (lines[1] + "\n" + lines[2]).encode(),
+            lines[3].encode(),
+        ]
+        kept = list(reader.batches(["var", "line"], where=lambda h: h["var"] == "A"))
+        assert [line for b in kept for line in b["line"]] == [6, 9]
+        assert reader.scanned == 3
+        entries = list(reader.entries())
+        assert entries[0].text == "x\udcff"
+
+
+def test_read_tail_gives_the_last_entries(tmp_path: Path) -> None:
+    path = tmp_path / "t.alog"
+    body = "".join(f"{i}.00000".ljust(15) + " K" + " " * 20 + "p" + " " * 15 + "v \n" for i in range(100))
+    path.write_text(BANNER + body + "100.00000       K")
+    tail = read_tail(path, 200)
+    assert tail["offset"].to_list()[-1] == 99.0
+    assert read_tail(path, 5).height == 0
+
+
+def test_stray_lines_raise_naming_the_line(tmp_path: Path) -> None:
+    path = tmp_path / "s.alog"
+    path.write_text(BANNER + "junk\n" + "1.0".ljust(15) + " K" + " " * 20 + "p" + " " * 15 + "v \n")
+    with AlogReader(path) as reader, pytest.raises(FormatError, match=r"s\.alog:7: 1 line"):
+        list(reader.batches())
+    assert BANNER_RULE in BANNER
