@@ -16,7 +16,6 @@ from collections.abc import Sequence
 from typing import TYPE_CHECKING
 
 from fleetlog.moos.alog import split_source
-from fleetlog.moos.patterns import MoosGlob
 from fleetlog.wire.query import TimeBound
 
 if TYPE_CHECKING:
@@ -24,16 +23,44 @@ if TYPE_CHECKING:
 
 __all__ = ["Selection"]
 
-#: Distinct names whose verdict is remembered; past that the memory starts over.
-_MAX_VERDICTS = 65536
+
+def glob_regex(pattern: str) -> str:
+    """Return a MOOS glob as a whole-string regular expression for polars (Rust ``regex``).
+
+    ``*`` matches any run of characters (also none), ``?`` one character, anything else
+    itself, case-sensitively, as ``MOOSWildCmp`` does. Rust's ``regex`` runs in time linear
+    in the text whatever the pattern (no backtracking), so a peer's ``*a*a*a*a*a*a*a*b``
+    costs what ``*`` costs.
+    """
+    parts = []
+    for char in pattern:
+        if char == "*":
+            parts.append(".*")
+        elif char == "?":
+            parts.append(".")
+        elif char.isascii() and not char.isalnum():
+            parts.append(f"\\x{{{ord(char):x}}}")
+        else:
+            parts.append(char)
+    return "(?s)^" + "".join(parts) + "$"
+
+
+def _any_glob(patterns: Sequence[str]) -> str | None:
+    if not patterns:
+        return None
+    return "|".join(f"(?:{glob_regex(p)})" for p in patterns)
 
 
 class Selection:
     """Decides which entries are kept; a ``where`` for the columnar reader.
 
+    Globs are matched by polars' Rust regular expressions, in linear time, on each block's
+    distinct names; nothing here runs a backtracking matcher or holds the GIL for long.
+
     Args:
         variables: MOOS globs of the variables to keep (none: every variable).
-        sources: MOOS globs of the sources to keep (none: every source).
+        sources: MOOS globs of the sources to keep (none: every source), tried on the whole
+            source column and on the process name before ``:``/``@``.
         low: the earliest offset (seconds since LOGSTART) kept, or None.
         high: the latest offset kept, or None.
         keys: MOOS globs matched against the variable *or* the process name, as aloggrep's
@@ -51,14 +78,11 @@ class Selection:
         self.variables = tuple(variables)
         self.sources = tuple(sources)
         self.keys = tuple(keys)
-        self._keys = Selection(keys, ()) if keys else None
-        self._key_sources = Selection((), keys) if keys else None
-        self._vars = [MoosGlob(p) for p in variables]
-        self._sources = [MoosGlob(p) for p in sources]
         self.low = low
         self.high = high
-        self._var_verdicts: dict[str, bool] = {}
-        self._source_verdicts: dict[str, bool] = {}
+        self._var_re = _any_glob(self.variables)
+        self._source_re = _any_glob(self.sources)
+        self._key_re = _any_glob(self.keys)
 
     @classmethod
     def of(
@@ -68,6 +92,7 @@ class Selection:
         start: TimeBound | None,
         end: TimeBound | None,
         logstart: float | None,
+        keys: Sequence[str] = (),
     ) -> Selection:
         """Build a selection whose time bounds may be absolute (converted with LOGSTART).
 
@@ -76,14 +101,14 @@ class Selection:
         """
         low = start.offset(logstart) if start else None
         high = end.offset(logstart) if end else None
-        return cls(variables, sources, low, high)
+        return cls(variables, sources, low, high, keys)
 
     @property
     def everything(self) -> bool:
         """True when nothing is filtered out."""
         return (
-            not self._vars
-            and not self._sources
+            not self.variables
+            and not self.sources
             and not self.keys
             and self.low is None
             and self.high is None
@@ -99,35 +124,6 @@ class Selection:
             self.keys,
         )
 
-    def var_ok(self, key: str) -> bool:
-        """Return True if a variable name is wanted."""
-        verdict = self._var_verdicts.get(key)
-        if verdict is None:
-            verdict = not self._vars or any(g.matches(key) for g in self._vars)
-            if len(self._var_verdicts) >= _MAX_VERDICTS:
-                self._var_verdicts.clear()
-            self._var_verdicts[key] = verdict
-        return verdict
-
-    def source_ok(self, source: str) -> bool:
-        """Return True if a source column is wanted (whole, or its process name)."""
-        verdict = self._source_verdicts.get(source)
-        if verdict is None:
-            process = split_source(source)[0]
-            verdict = not self._sources or any(
-                g.matches(source) or g.matches(process) for g in self._sources
-            )
-            if len(self._source_verdicts) >= _MAX_VERDICTS:
-                self._source_verdicts.clear()
-            self._source_verdicts[source] = verdict
-        return verdict
-
-    def time_ok(self, offset: float) -> bool:
-        """Return True if an offset lies in the window."""
-        return (self.low is None or offset >= self.low) and (
-            self.high is None or offset <= self.high
-        )
-
     def __call__(self, heads: pl.DataFrame) -> pl.Series:
         """Return which of a block's entries are wanted (``var``, ``source``, ``offset``)."""
         offset = heads["offset"]
@@ -136,16 +132,27 @@ class Selection:
             keep = keep & (offset >= self.low)
         if self.high is not None:
             keep = keep & (offset <= self.high)
-        if self._vars:
-            names = [k for k in heads["var"].unique().to_list() if self.var_ok(k)]
-            keep = keep & heads["var"].is_in(names)
-        if self._sources:
-            names = [s for s in heads["source"].unique().to_list() if self.source_ok(s)]
-            keep = keep & heads["source"].is_in(names)
-        if self._keys is not None and self._key_sources is not None:
-            by_var = [k for k in heads["var"].unique().to_list() if self._keys.var_ok(k)]
-            by_src = [
-                s for s in heads["source"].unique().to_list() if self._key_sources.source_ok(s)
-            ]
-            keep = keep & (heads["var"].is_in(by_var) | heads["source"].is_in(by_src))
+        if self._var_re is not None:
+            keep = keep & heads["var"].is_in(_matching(heads["var"], self._var_re))
+        if self._source_re is not None:
+            keep = keep & heads["source"].is_in(_matching_source(heads["source"], self._source_re))
+        if self._key_re is not None:
+            by_var = _matching(heads["var"], self._key_re)
+            by_source = _matching_source(heads["source"], self._key_re)
+            keep = keep & (heads["var"].is_in(by_var) | heads["source"].is_in(by_source))
         return keep
+
+
+def _matching(names: pl.Series, regex: str) -> pl.Series:
+    """The distinct names that match (in Rust: linear time, without the GIL)."""
+    distinct = names.unique()
+    return distinct.filter(distinct.str.contains(regex))
+
+
+def _matching_source(sources: pl.Series, regex: str) -> pl.Series:
+    """The distinct source columns whose whole text or process name matches."""
+    import polars as pl
+
+    distinct = sources.unique()
+    process = pl.Series([split_source(s)[0] for s in distinct.to_list()], dtype=pl.String)
+    return distinct.filter(distinct.str.contains(regex) | process.str.contains(regex))

@@ -94,7 +94,9 @@ def _read(reader_type: type, path: Path, **kwargs: object) -> tuple[list[Entry],
         return entries, reader.truncated, reader.skipped
 
 
-@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(
+    max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
 @given(data=alog_bytes())
 def test_reads_generated_logs_as_the_line_parser_does(tmp_path: Path, data: bytes) -> None:
     path = tmp_path / "g.alog"
@@ -163,7 +165,9 @@ def test_raw_is_the_entry_bytes_and_where_filters_before_typing(tmp_path: Path) 
 
 def test_read_tail_gives_the_last_entries(tmp_path: Path) -> None:
     path = tmp_path / "t.alog"
-    body = "".join(f"{i}.00000".ljust(15) + " K" + " " * 20 + "p" + " " * 15 + "v \n" for i in range(100))
+    body = "".join(
+        f"{i}.00000".ljust(15) + " K" + " " * 20 + "p" + " " * 15 + "v \n" for i in range(100)
+    )
     path.write_text(BANNER + body + "100.00000       K")
     tail = read_tail(path, 200)
     assert tail["offset"].to_list()[-1] == 99.0
