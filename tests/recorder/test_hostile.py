@@ -16,9 +16,10 @@ from pathlib import Path
 
 import pytest
 import zenoh
+from alog_oracle import iter_entries
 from helpers import Proc, run_cli
 
-from fleetlog.moos.alog import Entry, iter_entries, split_source
+from fleetlog.moos.alog import Entry, split_source
 from fleetlog.transport.session import SessionOptions, open_session
 from fleetlog.wire.message import ENCODINGS, Kind, encode_attachment
 
