@@ -14,6 +14,7 @@ import enum
 import math
 import re
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from fleetlog.errors import FormatError
 
@@ -71,9 +72,11 @@ class BinaryRef:
     size: int
 
 
-@dataclass(frozen=True, slots=True)
-class Entry:
+class Entry(NamedTuple):
     """One logged message as read from an alog line (or lines).
+
+    A named tuple: the reader makes millions of them, and a tuple is five times cheaper to
+    make than a frozen dataclass.
 
     Attributes:
         offset: seconds since LOGSTART (the banner's value), as written.
