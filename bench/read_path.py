@@ -37,13 +37,21 @@ def write_alog(path: Path, n: int) -> None:
     rnd = random.Random(1)
     fmt = LineFormatter()
     doubles = [
-        ("NAV_X", "pNav"), ("NAV_Y", "pNav"), ("NAV_HEADING", "pNav"), ("NAV_SPEED", "pNav"),
-        ("DESIRED_RUDDER", "pMarinePIDV22"), ("DESIRED_THRUST", "pMarinePIDV22"),
-        ("DB_TIME", "MOOSDB_alpha"), ("IVPHELM_ITER", "pHelmIvP"),
+        ("NAV_X", "pNav"),
+        ("NAV_Y", "pNav"),
+        ("NAV_HEADING", "pNav"),
+        ("NAV_SPEED", "pNav"),
+        ("DESIRED_RUDDER", "pMarinePIDV22"),
+        ("DESIRED_THRUST", "pMarinePIDV22"),
+        ("DB_TIME", "MOOSDB_alpha"),
+        ("IVPHELM_ITER", "pHelmIvP"),
     ]
     strings = [
-        ("NODE_REPORT_LOCAL", "pNodeReporter"), ("DEPLOY", "pHelmIvP:HELM_VAR_INIT"),
-        ("APPCAST", "pHelmIvP"), ("VIEW_POINT", "pHelmIvP"), ("IVPHELM_SUMMARY", "pHelmIvP"),
+        ("NODE_REPORT_LOCAL", "pNodeReporter"),
+        ("DEPLOY", "pHelmIvP:HELM_VAR_INIT"),
+        ("APPCAST", "pHelmIvP"),
+        ("VIEW_POINT", "pHelmIvP"),
+        ("IVPHELM_SUMMARY", "pHelmIvP"),
     ]
     t = 0.0
     with path.open("w") as out:
@@ -105,8 +113,13 @@ def run_oracle(path: Path) -> int:
         return sum(1 for _ in reader.entries())
 
 
-RUNS = {"split": run_split, "reader": run_reader, "info": run_info, "grep": run_grep,
-        "line parser": run_oracle}
+RUNS = {
+    "split": run_split,
+    "reader": run_reader,
+    "info": run_info,
+    "grep": run_grep,
+    "line parser": run_oracle,
+}
 
 
 def main() -> None:
@@ -124,8 +137,10 @@ def main() -> None:
 
     lines = sum(1 for _ in args.file.open("rb"))
     size = args.file.stat().st_size
-    print(f"file {args.file} {lines:,} lines {size / 1e6:.1f} MB; polars threads {args.threads};"
-          f" load {os.getloadavg()[0]:.2f}")
+    print(
+        f"file {args.file} {lines:,} lines {size / 1e6:.1f} MB; polars threads {args.threads};"
+        f" load {os.getloadavg()[0]:.2f}"
+    )
     rates: dict[str, list[float]] = {name: [] for name in RUNS}
     ratios: dict[str, list[float]] = {name: [] for name in RUNS}
     skip = set(filter(None, args.skip.split(",")))
@@ -146,8 +161,10 @@ def main() -> None:
             continue
         r = sorted(rates[name])
         q = sorted(ratios[name])
-        print(f"{name:12s} {r[len(r) // 2] / 1e6:5.2f}M lines/s [{r[0] / 1e6:.2f}-{r[-1] / 1e6:.2f}]"
-              f"  x split {q[len(q) // 2]:.2f} [{q[0]:.2f}-{q[-1]:.2f}]")
+        print(
+            f"{name:12s} {r[len(r) // 2] / 1e6:5.2f}M lines/s [{r[0] / 1e6:.2f}-{r[-1] / 1e6:.2f}]"
+            f"  x split {q[len(q) // 2]:.2f} [{q[0]:.2f}-{q[-1]:.2f}]"
+        )
     print(f"load after {os.getloadavg()[0]:.2f}")
 
 

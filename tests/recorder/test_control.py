@@ -14,8 +14,8 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
+from alog_oracle import iter_entries
 
-from fleetlog.moos.alog import iter_entries
 from fleetlog.moos.mission import LoggerConfig, parse_mission
 from fleetlog.recorder.control import QUEUE_LIMIT, RING_SIZE
 from fleetlog.recorder.engine import Recorder

@@ -18,10 +18,10 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from alog_oracle import iter_entries
 from helpers import Proc
 
 from fleetlog.api import Vehicle
-from fleetlog.moos.alog import iter_entries
 from fleetlog.transport.queries import ZenohSession, start_query
 from fleetlog.transport.session import SessionOptions, open_session
 from fleetlog.wire.query import sessions_from_json
