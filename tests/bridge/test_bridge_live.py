@@ -18,10 +18,11 @@ from pathlib import Path
 
 import pytest
 import zenoh
+from alog_oracle import iter_entries
 from helpers import Proc, run_cli
 from moos_support import MoosDB, Umm, needs_moos, wait_until
 
-from fleetlog.moos.alog import BinaryRef, iter_entries, parse_banner
+from fleetlog.moos.alog import BinaryRef, parse_banner
 from fleetlog.transport.session import SessionOptions
 from fleetlog.wire.message import attachment_fields
 
