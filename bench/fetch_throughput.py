@@ -2,7 +2,7 @@
 
 A generated session of about 200 MB (an alog of generated pLogger lines, a blog, a ylog) is
 served by ``fleetlog serve`` in a subprocess, a fresh one per round. The shore side fetches
-it with fleetlog's Python API (:func:`fleetlog.query.fetch.fetch_session`: 1 MiB ranges,
+it with fleetlog's Python API (:func:`fleetlog.shore.fetch.fetch_session`: 1 MiB ranges,
 8 in flight, written to ``.part``, sha256 verified, fsynced, renamed) three times a round:
 
 * **first**: right after ``fleetlog serve`` started, or ``--settle`` seconds after (it
@@ -47,8 +47,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 from fleetlog.moos.alog import LineFormatter, format_banner
-from fleetlog.query.client import FleetClient
-from fleetlog.query.fetch import fetch_session
+from fleetlog.shore.client import FleetClient
+from fleetlog.shore.fetch import fetch_session
 from fleetlog.transport.session import SessionOptions
 
 SESSION = "BENCH_1_1_2025_____00_00_00"

@@ -44,8 +44,8 @@ from benchlib import (
 from fetch_throughput import SESSION, make_session
 
 from fleetlog.errors import FleetlogError
-from fleetlog.query.client import FleetClient
-from fleetlog.query.fetch import fetch_session
+from fleetlog.shore.client import FleetClient
+from fleetlog.shore.fetch import fetch_session
 from fleetlog.wire.query import GrepRequest
 
 HERE = Path(__file__).resolve()

@@ -1,8 +1,10 @@
 """The layering of shared/STYLE.md §4, enforced.
 
-Imports flow one way: cli -> engines (recorder, query, replayer, tools, bridge) -> storage |
-transport -> wire -> moos -> errors. Only transport/ imports zenoh, only cli/ imports typer, and
-the pure layers (moos/, wire/) never touch files, sockets or clocks.
+Imports flow one way: cli -> engines (recorder, query, shore, replayer, tools, bridge) ->
+storage | transport -> wire -> moos -> errors. Only transport/ imports zenoh, only cli/ imports
+typer, and the pure layers (moos/, wire/) never touch files, sockets or clocks. The shore side
+(shore/) and the vehicle-side services (query/, recorder/) never import each other: they meet
+only in the wire protocol.
 """
 
 from __future__ import annotations
@@ -24,14 +26,15 @@ ALLOWED: dict[str, set[str]] = {
     "transport": {"moos", "wire"},
     "recorder": {"moos", "wire", "storage", "transport"},
     "query": {"moos", "wire", "storage", "transport"},
-    "replayer": {"moos", "wire", "storage", "transport", "query"},
+    "shore": {"moos", "wire", "storage", "transport"},
+    "replayer": {"moos", "wire", "storage", "transport", "shore"},
     "tools": {"moos", "wire", "storage"},
     "bridge": {"moos", "wire", "storage", "transport"},
     "api": {"moos", "wire", "transport"},
     "deploy": {"moos", "wire", "storage", "transport"},
     "cli": {
         *("moos", "wire", "storage", "transport"),
-        *("recorder", "query", "replayer", "tools", "api", "bridge", "deploy"),
+        *("recorder", "query", "shore", "replayer", "tools", "api", "bridge", "deploy"),
     },
 }
 PURE_FORBIDDEN = {"socket", "zenoh", "typer", "threading", "subprocess", "shutil"}

@@ -34,8 +34,8 @@ from fleetlog.cli.options import (
 from fleetlog.cli.shore import open_client
 from fleetlog.cli.tables import err_console, human_size
 from fleetlog.errors import FleetlogError, FormatError, QueryError, UsageError
-from fleetlog.query import fetch as fetching
-from fleetlog.query.client import FleetClient
+from fleetlog.shore import fetch as fetching
+from fleetlog.shore.client import FleetClient
 from fleetlog.wire.query import check_component
 
 __all__ = ["fetch"]

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from fleetlog.cli.options import checked_root, session_options
-from fleetlog.query.client import FleetClient
+from fleetlog.shore.client import FleetClient
 
 __all__ = ["open_client"]
 

@@ -1,13 +1,10 @@
-"""The query services: a vehicle's log root served over Zenoh, and the shore client.
+"""The vehicle side of the query services: a vehicle's log root served over Zenoh.
 
 :class:`~fleetlog.query.server.LogServer` serves a log root (``latest``, ``sessions``, files
-by byte range, remote grep); :class:`~fleetlog.query.client.FleetClient` asks vehicles;
-:func:`~fleetlog.query.fetch.fetch_session` downloads a session, resumable and verified.
+by byte range, remote grep). The shore side, which asks the vehicles, is :mod:`fleetlog.shore`.
 The protocol is :mod:`fleetlog.wire.query` (docs/wire.md, "Query services").
 """
 
-from fleetlog.query.client import FleetClient
-from fleetlog.query.fetch import fetch_session
 from fleetlog.query.server import LogServer
 
-__all__ = ["FleetClient", "LogServer", "fetch_session"]
+__all__ = ["LogServer"]

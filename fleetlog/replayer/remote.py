@@ -1,7 +1,7 @@
 """Remote inputs: ``V:latest`` and ``V:SESSION``, fetched from the vehicle into a cache first.
 
 The session is downloaded with the query service's resumable fetch
-(:func:`fleetlog.query.fetch.fetch_session`) into ``<cache>/<V>/<SESSION>/``, so replaying
+(:func:`fleetlog.shore.fetch.fetch_session`) into ``<cache>/<V>/<SESSION>/``, so replaying
 the same session again costs only a check that the files are up to date. A session still
 being written is replayed as far as it has arrived: its files stay ``.part`` (the fetch
 resumes them next time), and the replay reads them through hard links under their real
@@ -16,9 +16,9 @@ from pathlib import Path
 
 from fleetlog.errors import ReplayError, StorageError
 from fleetlog.moos.patterns import name_to_chunk
-from fleetlog.query.client import FleetClient
-from fleetlog.query.fetch import fetch_session
 from fleetlog.replayer.inputs import RemoteSpec
+from fleetlog.shore.client import FleetClient
+from fleetlog.shore.fetch import fetch_session
 from fleetlog.transport.session import SessionOptions
 
 __all__ = ["default_cache", "fetch_remote"]

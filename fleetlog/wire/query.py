@@ -2,7 +2,7 @@
 
 Pure code, no zenoh: keys and parameter strings in, validated requests out; reply objects to
 and from JSON. The vehicle side (:mod:`fleetlog.query.server`) and the shore side
-(:mod:`fleetlog.query.client`) both use it, so the two can never disagree.
+(:mod:`fleetlog.shore.client`) both use it, so the two can never disagree.
 
 Every service lives under ``<root>/V/@fleetlog/``:
 

@@ -243,7 +243,7 @@ def test_generated_session_grep_counts(fleet: Fleet, tmp_path: Path) -> None:
 
 
 def test_remote_entries_equal_local_entries(fleet: Fleet, reference: Path, tmp_path: Path) -> None:
-    from fleetlog.query.client import FleetClient
+    from fleetlog.shore.client import FleetClient
     from fleetlog.wire.query import GrepRequest
 
     run = copy_reference(reference, RUN_B1, tmp_path)

@@ -34,7 +34,7 @@ from pathlib import Path
 from typing import TypeVar
 
 from fleetlog.errors import QueryError, StorageError
-from fleetlog.query.client import FleetClient, PendingRange, TransientQueryError
+from fleetlog.shore.client import FleetClient, PendingRange, TransientQueryError
 from fleetlog.storage.download import PartFile, sha256_file
 from fleetlog.wire.query import DEFAULT_RANGE, FileInfo, FileMeta, check_component
 

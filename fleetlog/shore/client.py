@@ -2,7 +2,7 @@
 
 Example::
 
-    from fleetlog.query.client import FleetClient
+    from fleetlog.shore.client import FleetClient
     from fleetlog.transport.session import SessionOptions
 
     with FleetClient.open(SessionOptions(connect=("tcp/10.0.0.5:7447",))) as fleet:
