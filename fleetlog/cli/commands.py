@@ -12,6 +12,7 @@ from fleetlog.cli import (
     router,
     serve,
     sessions,
+    status,
     tools,
 )
 
@@ -27,5 +28,6 @@ __all__ = [
     "router",
     "serve",
     "sessions",
+    "status",
     "tools",
 ]

@@ -6,6 +6,7 @@ import math
 import sys
 import threading
 from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated
 
@@ -31,11 +32,12 @@ from fleetlog.cli.options import (
     checked_seconds,
     checked_vehicle,
 )
-from fleetlog.cli.shore import open_client
+from fleetlog.cli.shore import WAIT, Expect, Wait, discover, finish, open_client, warn
 from fleetlog.cli.tables import err_console, human_size
 from fleetlog.errors import FleetlogError, FormatError, QueryError, UsageError
 from fleetlog.shore import fetch as fetching
 from fleetlog.shore.client import FleetClient
+from fleetlog.shore.report import FleetReport
 from fleetlog.wire.query import check_component
 
 __all__ = ["fetch"]
@@ -66,35 +68,109 @@ class _Bars(fetching.Progress):
         self.progress.advance(self._task(vehicle), amount)
 
 
-def _targets(
-    client: FleetClient, vehicle: str | None, session: str | None, latest: bool, every: bool
-) -> list[tuple[str, str]]:
-    """Return the (vehicle, session) pairs to fetch."""
-    if every:
-        up = client.vehicles()
-        if not up:
-            msg = "no vehicle is up (no recorder or serve token answered; check --connect / --mode)"
-            raise QueryError(msg)
-        found = client.latest_all()
-        pairs: list[tuple[str, str]] = []
-        for name in sorted(up):
-            info = found.get(name)
-            if info is None:
-                print(f"fleetlog: warning: vehicle {name} does not serve its logs", file=sys.stderr)
-            elif info.session is None:
-                print(f"fleetlog: warning: vehicle {name} has no session", file=sys.stderr)
+@dataclass(frozen=True)
+class _Target:
+    """One session to fetch from one process, and where it goes."""
+
+    vehicle: str
+    session: str
+    directory: Path
+    server: str | None = None
+
+    @property
+    def label(self) -> str:
+        return self.vehicle if self.server is None else f"{self.vehicle}@{self.server}"
+
+
+def _place(out: Path, vehicle: str, server: str | None, every: bool, conflict: bool) -> Path:
+    """Where a vehicle's sessions go: DIR, DIR/VEHICLE (--all), DIR/VEHICLE@ZID (conflict)."""
+    if conflict:
+        return out / f"{vehicle}@{server}"
+    return out / vehicle if every else out
+
+
+def _answers_of(
+    client: FleetClient, vehicle: str, server: str | None
+) -> list[tuple[str | None, str | None]]:
+    """Return ``(server, latest session)`` for each process that answers for the vehicle."""
+    if server is not None:
+        info = client.latest(vehicle, server=server)
+        return [(info.server, info.session)]
+    return [(a.server, a.session) for a in client.latest_answers(vehicle)]
+
+
+def _every(
+    client: FleetClient, out: Path, expect: list[str] | None, report: FleetReport
+) -> list[_Target]:
+    """The latest session of every vehicle up, one target per answering process."""
+    view = discover(client, expect)
+    report.missing = view.missing
+    if not view.vehicles:
+        if report.missing:
+            return []
+        msg = "no vehicle is up (no recorder or serve token answered; check --connect / --mode)"
+        raise QueryError(msg)
+    found = client.latest_all()
+    targets: list[_Target] = []
+    for name in view.names:
+        try:
+            check_component(name, "vehicle")
+        except FormatError as err:
+            report.failed[name] = f"cannot be a directory name: {err}"
+            continue
+        answers = [(a.server, a.session) for a in found.get(name, [])]
+        if not answers:
+            # Not in the fleet-wide answer: ask it alone (a vehicle that just came up).
+            try:
+                answers = _answers_of(client, name, None)
+            except QueryError as err:
+                report.failed[name] = str(err)
+                continue
+        conflict = len(answers) > 1
+        if conflict:
+            servers = ", ".join(sorted(str(a[0]) for a in answers))
+            warn(f"vehicle {name}: {len(answers)} processes answer ({servers}); fetching each")
+        for server, session in answers:
+            place = _place(out, name, server, True, conflict)
+            target = _Target(name, session or "", place, server if conflict else None)
+            if session is None:
+                report.skipped[target.label] = "has no session"
             else:
-                pairs.append((name, info.session))
-        return pairs
-    assert vehicle is not None
+                targets.append(target)
+    return targets
+
+
+def _one(
+    client: FleetClient, vehicle: str, session: str | None, out: Path, server: str | None
+) -> list[_Target]:
+    """The session (or latest session) of one vehicle, from each process that holds it."""
     client.require(vehicle)
-    if session is None:
-        info = client.latest(vehicle)
-        if info.session is None:
-            msg = f"vehicle {vehicle} has no session to fetch"
-            raise QueryError(msg)
-        session = info.session
-    return [(vehicle, session)]
+    answers = _answers_of(client, vehicle, server)
+    conflict = len(answers) > 1
+    targets: list[_Target] = []
+    for zid, latest in answers:
+        pinned = zid if conflict or server is not None else None
+        wanted = session or latest
+        if wanted is None:
+            continue
+        if session is not None and conflict:
+            try:
+                client.session(vehicle, session, server=zid)
+            except QueryError:
+                continue  # the other recorder holds it
+        place = _place(out, vehicle, zid, False, conflict)
+        targets.append(_Target(vehicle, wanted, place, pinned))
+    if not targets:
+        what = f"no session {session!r}" if session is not None else "no session to fetch"
+        msg = f"vehicle {vehicle} has {what}"
+        raise QueryError(msg)
+    if conflict:
+        servers = ", ".join(sorted(str(a[0]) for a in answers))
+        warn(
+            f"vehicle {vehicle}: {len(answers)} processes answer ({servers}); fetching"
+            f" from each into {out}/{vehicle}@ZID/"
+        )
+    return targets
 
 
 def _report(outcome: fetching.FetchOutcome) -> str:
@@ -164,6 +240,17 @@ def fetch(
             help="How long to keep retrying a vehicle that stopped answering.",
         ),
     ] = fetching.RETRY_FOR,
+    server: Annotated[
+        str | None,
+        typer.Option(
+            "--server",
+            metavar="ZID",
+            help="Fetch from this process only (its Zenoh id), when two recorders answer for"
+            " the vehicle.",
+        ),
+    ] = None,
+    expect: Expect = None,
+    wait: Wait = WAIT,
     root: Root = "fleet",
     mode: Mode = None,
     connect: Connect = None,
@@ -177,6 +264,11 @@ def fetch(
     an interrupted fetch (Ctrl-C, a dropped link, a stopped vehicle) resumes when the same
     command is run again. A session still being written is fetched as far as it goes (kept
     as .part), unless --follow waits for its end.
+
+    With --all it first waits for the fleet (every --expect'ed vehicle, else until no new
+    vehicle appears), and exits non-zero naming each vehicle that was not up or failed.
+    When two processes answer for one vehicle (two recorders after a partition healed),
+    each one's session goes to DIR/VEHICLE@ZID/.
     """
     if every and (vehicle is not None or session is not None):
         msg = "--all fetches every vehicle's latest session; give no VEHICLE or SESSION with it"
@@ -194,6 +286,12 @@ def fetch(
         msg = f"--rate must be a positive number of MB/s, not {rate:g}"
         raise UsageError(msg)
     checked_seconds(retry_for, "--retry-for")
+    if expect and not every:
+        msg = "--expect names the vehicles --all should find; fetch VEHICLE waits for VEHICLE"
+        raise UsageError(msg)
+    if server is not None and every:
+        msg = "--server names one process of one vehicle; give VEHICLE instead of --all"
+        raise UsageError(msg)
     if vehicle is not None:
         checked_vehicle(vehicle, "VEHICLE")
     try:
@@ -202,9 +300,17 @@ def fetch(
     except FormatError as err:
         raise UsageError(str(err)) from None
     cancel = threading.Event()
-    with open_client(root, mode, connect, listen, config, no_multicast_scouting) as client:
-        pairs = _targets(client, vehicle, session, latest, every)
-        if not pairs:
+    report = FleetReport("fetched")
+    with open_client(
+        root, mode, connect, listen, config, no_multicast_scouting, wait=wait
+    ) as client:
+        if every:
+            targets = _every(client, out, expect, report)
+        else:
+            assert vehicle is not None
+            targets = _one(client, vehicle, session, out, server)
+        if not targets:
+            finish(report)
             return
         with Progress(
             TextColumn("{task.description}"),
@@ -216,27 +322,21 @@ def fetch(
             transient=False,
         ) as bar:
             bars = _Bars(bar)
-            pool = ThreadPoolExecutor(min(_MAX_PARALLEL, len(pairs)))
+            pool = ThreadPoolExecutor(min(_MAX_PARALLEL, len(targets)))
             futures: dict[str, Future[fetching.FetchOutcome]] = {}
-            for name, wanted in pairs:
-                target = out / name if every else out
-                if every:
-                    try:
-                        check_component(name, "vehicle")
-                    except FormatError as err:
-                        print(f"fleetlog: warning: skipped: {err}", file=sys.stderr)
-                        continue
-                futures[name] = pool.submit(
+            for target in targets:
+                futures[target.label] = pool.submit(
                     fetching.fetch_session,
                     client,
-                    name,
-                    wanted,
-                    target,
+                    target.vehicle,
+                    target.session,
+                    target.directory,
                     follow=follow,
                     progress=bars,
                     max_rate=rate * 1e6 if rate else None,
                     retry_for=retry_for,
                     cancel=cancel,
+                    server=target.server,
                 )
             try:
                 results = _collect(futures)
@@ -246,7 +346,7 @@ def fetch(
                 print("fleetlog: interrupted; the same command resumes", file=sys.stderr)
                 raise
             pool.shutdown(wait=True)
-    _finish(results)
+    _finish(results, report, single=not every and len(targets) == 1)
 
 
 def _collect(
@@ -261,17 +361,18 @@ def _collect(
     return results
 
 
-def _finish(results: list[tuple[str, fetching.FetchOutcome | FleetlogError]]) -> None:
-    failed: list[FleetlogError] = []
-    for _name, result in results:
+def _finish(
+    results: list[tuple[str, fetching.FetchOutcome | FleetlogError]],
+    report: FleetReport,
+    *,
+    single: bool,
+) -> None:
+    for label, result in results:
         if isinstance(result, FleetlogError):
-            failed.append(result)
+            if single:
+                raise result
+            report.failed[label] = str(result)
         else:
             print(_report(result))
-    if len(failed) == 1 and len(results) == 1:
-        raise failed[0]
-    for err in failed:
-        print(f"fleetlog: error: {err}", file=sys.stderr)
-    if failed:
-        msg = f"{len(failed)} of {len(results)} vehicle(s) failed; the same command resumes them"
-        raise QueryError(msg)
+            report.done[label] = "fetched" if result.complete else "partial"
+    finish(report)

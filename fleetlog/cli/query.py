@@ -21,7 +21,7 @@ from fleetlog.cli.options import (
     checked_seconds,
     checked_vehicle,
 )
-from fleetlog.cli.shore import open_client
+from fleetlog.cli.shore import WAIT, Wait, open_client
 from fleetlog.errors import FormatError, QueryError, UsageError
 from fleetlog.moos.alog import Variant, format_entry
 from fleetlog.shore.client import GrepStream
@@ -138,6 +138,15 @@ def query(
         float,
         typer.Option("--timeout", metavar="SECONDS", help="Seconds the whole answer may take."),
     ] = 300.0,
+    server: Annotated[
+        str | None,
+        typer.Option(
+            "--server",
+            metavar="ZID",
+            help="Ask this process only (its Zenoh id), when two recorders answer for the vehicle.",
+        ),
+    ] = None,
+    wait: Wait = WAIT,
     root: Root = "fleet",
     mode: Mode = None,
     connect: Connect = None,
@@ -177,15 +186,17 @@ def query(
     except FormatError as err:
         raise UsageError(str(err)) from None
     with open_client(
-        root, mode, connect, listen, config, no_multicast_scouting, grep_timeout=timeout
+        root, mode, connect, listen, config, no_multicast_scouting, grep_timeout=timeout, wait=wait
     ) as client:
         client.require(vehicle)
+        # One process's answer: two recorders of one vehicle would interleave their greps.
+        latest = client.latest(vehicle, server=server)
         if session is None:
-            session = client.latest(vehicle).session
+            session = latest.session
             if session is None:
                 msg = f"vehicle {vehicle} has no session"
                 raise QueryError(msg)
-        stream = client.grep(vehicle, session, request)
+        stream = client.grep(vehicle, session, request, server=server)
         _print(stream, fmt)
         end_record = stream.end
     if end_record is None:

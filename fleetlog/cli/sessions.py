@@ -18,8 +18,9 @@ from fleetlog.cli.options import (
     checked_seconds,
     checked_vehicle,
 )
-from fleetlog.cli.shore import open_client
+from fleetlog.cli.shore import WAIT, Wait, open_client, warn
 from fleetlog.cli.tables import console, sessions_table
+from fleetlog.wire.query import LatestInfo
 
 __all__ = ["sessions"]
 
@@ -43,6 +44,16 @@ def sessions(
             help="Seconds to wait (a first listing reads every alog).",
         ),
     ] = 120.0,
+    server: Annotated[
+        str | None,
+        typer.Option(
+            "--server",
+            metavar="ZID",
+            help="List this process's sessions only (its Zenoh id), when two recorders answer"
+            " for the vehicle.",
+        ),
+    ] = None,
+    wait: Wait = WAIT,
     root: Root = "fleet",
     mode: Mode = None,
     connect: Connect = None,
@@ -50,15 +61,34 @@ def sessions(
     config: Config = None,
     no_multicast_scouting: NoScouting = False,
 ) -> None:
-    """List a vehicle's log sessions, oldest first; the latest is marked with '*'."""
+    """List a vehicle's log sessions, oldest first; the latest is marked with '*'.
+
+    When two processes answer for the vehicle (two recorders after a partition healed),
+    each one's sessions are listed under its Zenoh id.
+    """
     checked_vehicle(vehicle, "VEHICLE")
     checked_seconds(timeout, "--timeout", zero=False)
-    with open_client(root, mode, connect, listen, config, no_multicast_scouting) as client:
+    with open_client(
+        root, mode, connect, listen, config, no_multicast_scouting, wait=wait
+    ) as client:
         client.require(vehicle)
-        found = client.sessions(vehicle, timeout=timeout)
-        latest = client.latest(vehicle).session
-    if as_json:
-        for info in found:
-            print(json.dumps({**info.as_json(), "latest": info.name == latest}))
-        return
-    console().print(sessions_table(found, latest))
+        found = client.sessions_by_server(vehicle, timeout=timeout, server=server)
+        latest: dict[str | None, LatestInfo] = {a.server: a for a in client.latest_answers(vehicle)}
+    if len(found) > 1:
+        warn(
+            f"vehicle {vehicle}: {len(found)} processes answer ({', '.join(map(str, found))});"
+            " two recorders of one vehicle (a partition that healed?)"
+        )
+    for zid, infos in found.items():
+        info = latest.get(zid)
+        newest = info.session if info is not None else None
+        if as_json:
+            for item in infos:
+                row = {**item.as_json(), "latest": item.name == newest}
+                if len(found) > 1:
+                    row["server"] = zid
+                print(json.dumps(row))
+            continue
+        if len(found) > 1:
+            console().print(f"[bold]{vehicle}@{zid}[/bold]")
+        console().print(sessions_table(infos, newest))

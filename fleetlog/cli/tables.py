@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import datetime as dt
 import sys
+from collections.abc import Collection, Mapping
 
 from rich.console import Console
 from rich.table import Table
+from rich.text import Text
 
 from fleetlog.wire.query import LatestInfo, SessionInfo
 
@@ -17,6 +19,7 @@ __all__ = [
     "human_duration",
     "human_size",
     "human_time",
+    "plain",
     "sessions_table",
 ]
 
@@ -33,6 +36,16 @@ def console() -> Console:
 def err_console() -> Console:
     """The console for progress and notes (stderr)."""
     return Console(stderr=True, highlight=False)
+
+
+def plain(text: str, style: str = "") -> Text:
+    """Text from a vehicle, shown as it is: no rich markup, control characters made visible.
+
+    A session name or an error message comes from the network; ``[red]`` in it must not
+    restyle the terminal, nor an escape sequence reach it.
+    """
+    shown = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+    return Text(shown, style=style)
 
 
 def human_size(size: int) -> str:
@@ -66,21 +79,34 @@ def human_time(epoch: float | None) -> str:
     return when.strftime("%Y-%m-%d %H:%M:%SZ")
 
 
-def fleet_table(vehicles: dict[str, set[str]], latest: dict[str, LatestInfo]) -> Table:
-    """The ``fleetlog fleet`` table: each vehicle up, what it runs, its latest session."""
+def fleet_table(
+    vehicles: Mapping[str, Collection[str]], latest: Mapping[str, list[LatestInfo]]
+) -> Table:
+    """The ``fleetlog fleet`` table: each vehicle up, what it runs, its latest session.
+
+    A vehicle that two processes answer for (two recorders after a partition healed) gets
+    a row for each, with a SERVER column naming them.
+    """
+    conflict = any(len(answers) > 1 for answers in latest.values())
     table = Table(box=None, pad_edge=False)
-    for column in ("VEHICLE", "UP", "LATEST SESSION", "STATE", "STARTED"):
+    columns = ["VEHICLE", "UP", "LATEST SESSION", "STATE", "STARTED"]
+    for column in [*columns, "SERVER"] if conflict else columns:
         table.add_column(column, no_wrap=True)
     for vehicle in sorted(vehicles):
-        info = latest.get(vehicle)
         services = ",".join(sorted(vehicles[vehicle]))
-        if info is None:
-            table.add_row(vehicle, services, "(does not serve its logs)", "-", "-")
-        elif info.session is None:
-            table.add_row(vehicle, services, "(no session)", "-", "-")
-        else:
-            state = "writing" if info.writing else "complete"
-            table.add_row(vehicle, services, info.session, state, human_time(info.start))
+        answers: list[LatestInfo | None] = [*latest.get(vehicle, [])] or [None]
+        for info in answers:
+            if info is None:
+                row = [vehicle, services, "(does not serve its logs)", "-", "-"]
+            elif info.session is None:
+                row = [vehicle, services, "(no session)", "-", "-"]
+            else:
+                state = "writing" if info.writing else "complete"
+                row = [vehicle, services, info.session, state, human_time(info.start)]
+            if conflict:
+                many = len(answers) > 1
+                row.append(f"{info.server} (CONFLICT)" if many and info else "")
+            table.add_row(*row)
     return table
 
 

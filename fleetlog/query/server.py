@@ -29,6 +29,7 @@ server keeps serving.
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import threading
 import time
@@ -46,6 +47,7 @@ from fleetlog.transport.queries import (
     ZenohSession,
     declare_token,
 )
+from fleetlog.transport.services import zenoh_id
 from fleetlog.wire.keys import DEFAULT_ROOT, check_root, service_key
 from fleetlog.wire.query import (
     FILE,
@@ -62,6 +64,7 @@ from fleetlog.wire.query import (
     parse_service_parts,
     parse_sessions_request,
     sessions_to_json,
+    split_server,
 )
 
 __all__ = ["LogServer"]
@@ -119,7 +122,8 @@ class LogServer:
         root: the key root.
         vehicle: the vehicle whose keys are served; the catalog's by default.
         announce: declare the ``serve`` liveliness token (``fleetlog serve``; the recorder
-            has its own ``recorder`` token).
+            has its own ``recorder`` token). Without it the server is the recorder's, and
+            its replies name it as the vehicle's ``recorder``.
         workers: threads of the light pool (ranges, latest, brief listings).
         heavy_workers: threads of the heavy pool (full listings, sha256, grep).
         warm: hash the latest session at start and each session the recorder closes, before
@@ -146,6 +150,9 @@ class LogServer:
         self.root = check_root(root)
         self.vehicle = vehicle if vehicle is not None else catalog.vehicle
         self.announce = announce
+        #: this process's Zenoh id: replies name it, and ``server=ZID`` requests match it
+        self.zid = zenoh_id(session)
+        self._recorder = None if announce else self.zid
         self.stats: dict[str, int] = {"requests": 0, "errors": 0, "refused": 0, "bytes": 0}
         self._stats_lock = threading.Lock()
         self._light = _Pool("fleetlog-serve", workers, 64)
@@ -222,6 +229,24 @@ class LogServer:
         self.close()
 
     # -- dispatching
+
+    def _mine(self, query: IncomingQuery) -> bool:
+        """Take out ``server=ZID``; False (and the query finished) if it asks another process.
+
+        Two processes serving one vehicle both receive every query; the one not named stays
+        silent, so the querier hears only the one it asked.
+        """
+        try:
+            server, rest = split_server(query.parameters)
+        except FormatError as err:
+            query.reply_err(str(err))
+            query.finish()
+            return False
+        if server is not None and server != self.zid:
+            query.finish()
+            return False
+        query.parameters = rest
+        return True
 
     def _count(self, name: str, amount: int = 1) -> None:
         with self._stats_lock:
@@ -303,18 +328,21 @@ class LogServer:
     # -- services
 
     def _on_latest(self, query: IncomingQuery) -> None:
-        self._submit(self._light, query, self._latest)
+        if self._mine(query):
+            self._submit(self._light, query, self._latest)
 
     def _latest(self, query: IncomingQuery) -> None:
         self._names(query, LATEST)
         if query.parameters:
             msg = f"the latest service takes no parameters, got {query.parameters[:80]!r}"
             raise FormatError(msg)
-        info = self.catalog.latest()
+        info = dataclasses.replace(self.catalog.latest(), server=self.zid, recorder=self._recorder)
         key = service_key(self.root, self.vehicle, LATEST)
         query.reply(key, info.to_json(), encoding=_JSON)
 
     def _on_sessions(self, query: IncomingQuery) -> None:
+        if not self._mine(query):
+            return
         try:
             brief = parse_sessions_request(query.parameters).brief
         except FormatError:
@@ -329,10 +357,13 @@ class LogServer:
         else:
             infos = self.catalog.sessions(brief=request.brief)
         key = service_key(self.root, self.vehicle, SESSIONS)
-        for payload in sessions_to_json(self.vehicle, infos):
+        replies = sessions_to_json(self.vehicle, infos, server=self.zid, recorder=self._recorder)
+        for payload in replies:
             query.reply(key, payload, encoding=_JSON)
 
     def _on_file(self, query: IncomingQuery) -> None:
+        if not self._mine(query):
+            return
         try:
             digest = parse_file_request(query.parameters).sha256
         except FormatError:
@@ -358,7 +389,8 @@ class LogServer:
         sent()
 
     def _on_grep(self, query: IncomingQuery) -> None:
-        self._submit(self._heavy, query, self._grep)
+        if self._mine(query):
+            self._submit(self._heavy, query, self._grep)
 
     def _grep(self, query: IncomingQuery) -> None:
         (session,) = self._names(query, GREP)

@@ -118,6 +118,7 @@ class _Context:
     retry_for: float
     limit: _RateLimit
     cancel: threading.Event
+    server: str | None = None
     received: int = 0
 
 
@@ -159,8 +160,16 @@ class _Transfer:
     def _ask_digest(self, size: int) -> PendingRange:
         # Hashing runs at roughly 1 GB/s; give large files the time they need.
         timeout = 60.0 + size / 20e6
-        return self.ctx.client.request_range(
-            self.ctx.vehicle, self.ctx.session, self.name, 0, 0, sha256=True, timeout=timeout
+        ctx = self.ctx
+        return ctx.client.request_range(
+            ctx.vehicle,
+            ctx.session,
+            self.name,
+            0,
+            0,
+            sha256=True,
+            timeout=timeout,
+            server=ctx.server,
         )
 
     def prepare(self, remote: FileInfo, complete: bool) -> None:
@@ -273,7 +282,9 @@ class _Transfer:
                 length = min(ctx.chunk, end - cursor)
                 ctx.limit.wait(length)
                 inflight.append(
-                    ctx.client.request_range(ctx.vehicle, ctx.session, self.name, cursor, length)
+                    ctx.client.request_range(
+                        ctx.vehicle, ctx.session, self.name, cursor, length, server=ctx.server
+                    )
                 )
                 cursor += length
             if not inflight:
@@ -307,7 +318,9 @@ class _Transfer:
 
     def _remote_size(self) -> int:
         ctx = self.ctx
-        _, meta = ctx.client.read_range(ctx.vehicle, ctx.session, self.name, 0, 0)
+        _, meta = ctx.client.read_range(
+            ctx.vehicle, ctx.session, self.name, 0, 0, server=ctx.server
+        )
         return meta.size
 
     def recheck(self) -> None:
@@ -372,6 +385,7 @@ def fetch_session(
     retry_for: float = RETRY_FOR,
     max_rate: float | None = None,
     cancel: threading.Event | None = None,
+    server: str | None = None,
 ) -> FetchOutcome:
     """Download a session of a vehicle into ``out_dir/<session>/``.
 
@@ -388,6 +402,7 @@ def fetch_session(
         retry_for: seconds to keep retrying a vehicle that stopped answering.
         max_rate: bytes per second at most (a thin radio link), or None.
         cancel: set it to stop the fetch; the ``.part`` files stay.
+        server: ask only the process with this Zenoh id (one of two recorders of the vehicle).
 
     Returns:
         What was fetched.
@@ -410,12 +425,15 @@ def fetch_session(
         retry_for,
         _RateLimit(max_rate),
         cancel or threading.Event(),
+        server,
     )
     transfers: dict[str, _Transfer] = {}
     try:
         while True:
             # Following: a vehicle that stops answering between two looks is retried too.
-            info = _riding_out(ctx, lambda: client.session(vehicle, session, brief=True))
+            info = _riding_out(
+                ctx, lambda: client.session(vehicle, session, brief=True, server=server)
+            )
             ctx.progress.total(vehicle, info.size)
             for remote in info.files:
                 transfer = transfers.get(remote.name)

@@ -207,12 +207,14 @@ class ReplyItem:
         payload: the sample's payload (empty for an error reply).
         attachment: the sample's attachment, if any.
         error: the error reply's text.
+        replier: the Zenoh id of the process that replied, if Zenoh says.
     """
 
     key: str
     payload: bytes
     attachment: bytes | None = None
     error: str | None = None
+    replier: str | None = None
 
 
 class PendingQuery:
@@ -234,15 +236,19 @@ class PendingQuery:
         try:
             for reply in self._handler:
                 sample = reply.ok
+                replier = reply.replier_id
+                who = None if replier is None else str(replier.zid)
                 if sample is not None:
                     attachment = sample.attachment
                     yield ReplyItem(
                         str(sample.key_expr),
                         sample.payload.to_bytes(),
                         None if attachment is None else attachment.to_bytes(),
+                        None,
+                        who,
                     )
                 elif reply.err is not None:
-                    yield ReplyItem("", b"", None, reply.err.payload.to_string())
+                    yield ReplyItem("", b"", None, reply.err.payload.to_string(), who)
         except zenoh.ZError as err:
             msg = f"query {self.selector!r} failed: {err}"
             raise TransportError(msg) from err

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
+import queue
 from typing import Any
 
 import zenoh
@@ -11,7 +13,68 @@ from fleetlog.errors import FormatError, QueryError
 from fleetlog.transport.session import translate_zerror
 from fleetlog.wire.keys import fleet_service_selector, parse_service_key, service_key
 
-__all__ = ["get_json", "get_replies", "live_vehicles", "refusal_hint", "routers_connected"]
+__all__ = [
+    "TokenWatch",
+    "get_json",
+    "get_replies",
+    "live_vehicles",
+    "refusal_hint",
+    "routers_connected",
+    "zenoh_id",
+]
+
+
+def zenoh_id(session: zenoh.Session) -> str:
+    """Return the session's Zenoh id (hex), the name the network knows the process by."""
+    return str(session.info.zid())
+
+
+class TokenWatch:
+    """The liveliness tokens matching a key expression, as they come and go, with history.
+
+    The subscriber is declared with history, so tokens declared before it arrive as well;
+    :meth:`next_change` hands them over one at a time, and :meth:`neighbours` tells which
+    Zenoh peers and routers the session is connected to right now (a newly connected peer
+    may be about to deliver tokens).
+
+    Args:
+        session: an open session (not closed here).
+        selector: the tokens' key expression.
+
+    Raises:
+        TransportError: Zenoh refused the subscription.
+    """
+
+    def __init__(self, session: zenoh.Session, selector: str) -> None:
+        self._session = session
+        self._changes: queue.SimpleQueue[tuple[str, bool]] = queue.SimpleQueue()
+
+        def receive(sample: zenoh.Sample) -> None:
+            alive = sample.kind == zenoh.SampleKind.PUT
+            self._changes.put((str(sample.key_expr), alive))
+
+        with translate_zerror(f"liveliness subscription {selector!r}"):
+            self._sub = session.liveliness().declare_subscriber(selector, receive, history=True)
+
+    def next_change(self, timeout: float) -> tuple[str, bool] | None:
+        """Return the next ``(key, alive)`` change, waiting up to ``timeout``; None if none."""
+        try:
+            if timeout <= 0:
+                return self._changes.get_nowait()
+            return self._changes.get(timeout=timeout)
+        except queue.Empty:
+            return None
+
+    def neighbours(self) -> frozenset[str]:
+        """Return the Zenoh ids of the peers and routers connected now."""
+        with translate_zerror("session info"):
+            info = self._session.info
+            return frozenset(str(z) for z in (*info.peers_zid(), *info.routers_zid()))
+
+    def close(self) -> None:
+        """Undeclare the subscriber (before the session closes: a live callback hangs it)."""
+        with contextlib.suppress(zenoh.ZError, RuntimeError):
+            self._sub.undeclare()
 
 
 def live_vehicles(

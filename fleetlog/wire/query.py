@@ -14,6 +14,10 @@ Every service lives under ``<root>/V/@fleetlog/``:
 * ``grep/<session>`` — the entries of a session's alog filtered by variables, sources and a
   time window, up to a limit, streamed back as JSON lines in bounded replies.
 
+Every service also takes ``server=ZID``: only the process with that Zenoh id answers (two
+recorders of one vehicle after a partition heals both serve the same keys; the shore then
+asks each by its id). ``latest`` and ``sessions`` replies say which process answered.
+
 Session and file names are escaped into key chunks as every MOOS name is
 (:func:`fleetlog.moos.patterns.name_to_chunk`) and must be single path components: not
 empty, not ``.`` or ``..``, no ``/`` and no NUL. Parameter values are percent-decoded
@@ -45,6 +49,7 @@ __all__ = [
     "MAX_RANGE",
     "RECORDER_TOKEN",
     "REPLY_TARGET",
+    "SERVER",
     "SERVE_TOKEN",
     "SESSIONS",
     "FileInfo",
@@ -70,8 +75,11 @@ __all__ = [
     "parse_service_parts",
     "parse_sessions_request",
     "session_key",
+    "sessions_by_server",
     "sessions_from_json",
     "sessions_to_json",
+    "split_server",
+    "with_server",
 ]
 
 #: the liveliness token of a recorder
@@ -83,6 +91,8 @@ LATEST = "latest"
 SESSIONS = "sessions"
 FILE = "file"
 GREP = "grep"
+#: the parameter every service takes: only the process with this Zenoh id answers
+SERVER = "server"
 
 #: what a range request gets when it names no length: measured here, 1 MB replies with a few
 #: in flight reach 300-500 MB/s between processes
@@ -101,6 +111,7 @@ MAX_OFFSET = 1 << 50
 
 _PERCENT = re.compile(r"%(?![0-9A-Fa-f]{2})")
 _INT = re.compile(r"[0-9]{1,16}")
+_ZID = re.compile(r"[0-9a-f]{1,32}")
 _FLOAT = re.compile(r"[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][-+]?[0-9]+)?")
 
 
@@ -316,6 +327,46 @@ def _flag(params: Mapping[str, str], name: str) -> bool:
         return True
     msg = f"parameter {name!r} must be 1 or 0, not {text[:40]!r}"
     raise FormatError(msg)
+
+
+def split_server(text: str) -> tuple[str | None, str]:
+    """Take the ``server=ZID`` parameter out of a request's parameters.
+
+    Returns:
+        The Zenoh id asked for (None if the request names none) and the other parameters,
+        for the service's own parser.
+
+    Raises:
+        FormatError: the parameters are too long, or the id is not 1-32 lower-case hex
+            digits.
+    """
+    if len(text) > MAX_PARAMETERS:
+        msg = f"the parameters are {len(text)} characters long; at most {MAX_PARAMETERS}"
+        raise FormatError(msg)
+    if SERVER not in text:
+        return None, text
+    server: str | None = None
+    rest: list[str] = []
+    for item in text.split(";"):
+        name, _, value = item.partition("=")
+        if name != SERVER:
+            rest.append(item)
+            continue
+        if server is not None:
+            msg = f"parameter {SERVER!r} is given twice"
+            raise FormatError(msg)
+        if not _ZID.fullmatch(value):
+            msg = f"parameter {SERVER!r} must be a Zenoh id (hex), not {value[:40]!r}"
+            raise FormatError(msg)
+        server = value
+    return server, ";".join(rest)
+
+
+def with_server(parameters: str, server: str | None) -> str:
+    """Return ``parameters`` with ``server=ZID`` added (unchanged for None)."""
+    if server is None:
+        return parameters
+    return f"{parameters};{SERVER}={server}" if parameters else f"{SERVER}={server}"
 
 
 # --------------------------------------------------------------------------------------------
@@ -692,46 +743,74 @@ class SessionInfo:
         )
 
 
-def sessions_to_json(vehicle: str, sessions: Sequence[SessionInfo]) -> list[bytes]:
+def sessions_to_json(
+    vehicle: str,
+    sessions: Sequence[SessionInfo],
+    *,
+    server: str | None = None,
+    recorder: str | None = None,
+) -> list[bytes]:
     """Return the ``sessions`` replies: ``{"vehicle", "sessions": [...], "more"}`` objects.
 
     Sessions are split over several replies of about :data:`REPLY_TARGET` bytes, so a vehicle
     with thousands of sessions never sends one huge reply; ``more`` is false on the last.
+    Each reply also names the answering process (``server``, its Zenoh id) and, when that
+    process is the vehicle's recorder, ``recorder`` (the same id).
     """
     replies: list[bytes] = []
     batch: list[dict[str, Any]] = []
     size = 0
+    who = {"server": server, "recorder": recorder}
     for info in sessions:
         obj = info.as_json()
         batch.append(obj)
         size += len(_dump(obj))
         if size >= REPLY_TARGET:
-            replies.append(_dump({"vehicle": vehicle, "sessions": batch, "more": True}))
+            replies.append(_dump({"vehicle": vehicle, **who, "sessions": batch, "more": True}))
             batch, size = [], 0
-    replies.append(_dump({"vehicle": vehicle, "sessions": batch, "more": False}))
+    replies.append(_dump({"vehicle": vehicle, **who, "sessions": batch, "more": False}))
     return replies
 
 
-def sessions_from_json(replies: Sequence[bytes]) -> list[SessionInfo]:
-    """Read the ``sessions`` replies back, in order.
+def sessions_by_server(replies: Sequence[bytes]) -> dict[str | None, list[SessionInfo]]:
+    """Read the ``sessions`` replies back, in order, each answering process's apart.
+
+    Two processes that serve the same vehicle (two recorders after a partition heals) both
+    answer one query; their replies interleave, and each reply names its ``server``.
 
     Raises:
-        FormatError: a reply is not the shape above, or the last one is missing.
+        FormatError: a reply is not the shape above, or a process's last one is missing.
     """
-    out: list[SessionInfo] = []
-    more = True
+    out: dict[str | None, list[SessionInfo]] = {}
+    more: dict[str | None, bool] = {}
     for data in replies:
         obj = _load(data, "sessions reply")
+        server = _opt(obj, SERVER, str, "sessions reply")
+        found = out.setdefault(server, [])
         for item in _get(obj, "sessions", list, "sessions reply"):
             if not isinstance(item, dict):
                 msg = "sessions reply: a session is not an object"
                 raise FormatError(msg)
-            out.append(SessionInfo.from_json(item))
-        more = _get(obj, "more", bool, "sessions reply")
-    if more:
+            found.append(SessionInfo.from_json(item))
+        more[server] = _get(obj, "more", bool, "sessions reply")
+    if not out or any(more.values()):
         msg = "the sessions replies ended before the last one (the link dropped?)"
         raise FormatError(msg)
     return out
+
+
+def sessions_from_json(replies: Sequence[bytes]) -> list[SessionInfo]:
+    """Read the ``sessions`` replies of one answering process back, in order.
+
+    Raises:
+        FormatError: a reply is not the shape above, the last one is missing, or the replies
+            come from two processes (see :func:`sessions_by_server`).
+    """
+    found = sessions_by_server(replies)
+    if len(found) > 1:
+        msg = f"the sessions replies come from {len(found)} processes"
+        raise FormatError(msg)
+    return next(iter(found.values()))
 
 
 @dataclass(frozen=True, slots=True)
@@ -746,6 +825,9 @@ class LatestInfo:
             ``.LastOpenedMOOSLogDirectory`` file) or ``newest`` (by its time stamp).
         hint: the directory the hint file names, as written, if one was read.
         start: the session's LOGSTART, if its alog has one.
+        server: the Zenoh id of the process that answered.
+        recorder: the Zenoh id of the vehicle's recorder, when the recorder answered (None
+            for ``fleetlog serve``).
     """
 
     vehicle: str
@@ -754,6 +836,8 @@ class LatestInfo:
     how: str
     hint: str | None = None
     start: float | None = None
+    server: str | None = None
+    recorder: str | None = None
 
     def to_json(self) -> bytes:
         """Return the reply bytes."""
@@ -765,6 +849,8 @@ class LatestInfo:
                 "how": self.how,
                 "hint": self.hint,
                 "start": self.start,
+                "server": self.server,
+                "recorder": self.recorder,
             }
         )
 
@@ -786,6 +872,8 @@ class LatestInfo:
             _get(obj, "how", str, what),
             _opt(obj, "hint", str, what),
             None if start is None else float(start),
+            _opt(obj, "server", str, what),
+            _opt(obj, "recorder", str, what),
         )
 
 

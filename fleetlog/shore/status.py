@@ -1,0 +1,205 @@
+"""A recorder's status, as the shore reads it (``<root>/V/@fleetlog/status``, docs/wire.md).
+
+The reply comes from the network, so it is read defensively: every field is optional and
+checked for its type, numbers must be finite, texts are cut to a bounded length, and the
+``commands`` ring (the outcomes of the recorder's last commands) holds at most 64 entries.
+A field this version does not know is kept in :attr:`VehicleStatus.raw` for ``--json``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from fleetlog.errors import FormatError
+
+__all__ = ["COUNTERS", "CommandOutcome", "VehicleStatus"]
+
+#: the counters a recorder reports, in the order a table shows them
+COUNTERS = (
+    "received",
+    "logged",
+    "excluded",
+    "ignored",
+    "throttled",
+    "skewed",
+    "garbled",
+    "lost",
+    "missed",
+    "write_errors",
+    "refused_copies",
+    "sessions",
+)
+#: at most this many commands are read from a status reply
+MAX_COMMANDS = 64
+#: texts from the vehicle are cut to this many characters
+MAX_TEXT = 512
+#: a status reply larger than this is refused unread
+MAX_STATUS = 1 << 20
+
+
+def _text(value: Any) -> str | None:
+    if not isinstance(value, str):
+        return None
+    return value if len(value) <= MAX_TEXT else value[: MAX_TEXT - 1] + "…"
+
+
+def _number(value: Any) -> float | None:
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return None
+    return float(value) if math.isfinite(value) else None
+
+
+def _count(value: Any) -> int | None:
+    if isinstance(value, bool) or not isinstance(value, int) or value < 0:
+        return None
+    return value
+
+
+@dataclass(frozen=True)
+class CommandOutcome:
+    """What the recorder did with one command (an entry of its ``commands`` ring).
+
+    Attributes:
+        time: the command message's own time (seconds since the epoch), if known.
+        via: how it came: ``control``, ``PLOGGER_CMD``, ``LOGGER_RESTART``, ...
+        source: who sent it, as the sender said.
+        cmd: the command.
+        text: the command as received (cut short).
+        ok: it was done.
+        did: what was done, one sentence.
+        why: why it was refused.
+    """
+
+    time: float | None
+    via: str
+    source: str
+    cmd: str
+    text: str
+    ok: bool
+    did: str
+    why: str | None
+
+    @classmethod
+    def from_json(cls, obj: Mapping[str, Any]) -> CommandOutcome:
+        """Read one ring entry (missing or mistyped fields become empty)."""
+        return cls(
+            _number(obj.get("time")),
+            _text(obj.get("via")) or "",
+            _text(obj.get("source")) or "",
+            _text(obj.get("cmd")) or "",
+            _text(obj.get("text")) or "",
+            obj.get("ok") is True,
+            _text(obj.get("did")) or "",
+            _text(obj.get("why")),
+        )
+
+    def describe(self) -> str:
+        """One line: the command, and what was done or why it was refused."""
+        what = self.text or self.cmd
+        if self.ok:
+            return f"{what}: {self.did or 'done'}"
+        return f"{what}: refused: {self.why or 'no reason given'}"
+
+
+@dataclass(frozen=True)
+class VehicleStatus:
+    """One recorder's status reply.
+
+    Attributes:
+        vehicle: the vehicle, as the recorder names it.
+        server: the Zenoh id of the recorder that answered, if known.
+        directory: the current session directory (as LOGGER_DIRECTORY), if one is open.
+        session: the current session's name.
+        counters: the counters (:data:`COUNTERS`, and any other whole-number field).
+        last_error: the last error the recorder met, or empty.
+        commands: the outcomes of its last commands, oldest first.
+        disk_free: bytes free where it writes, if it says.
+        disk_total: the size of that file system, if it says.
+        clock: the clock's state, as the recorder reports it (``synchronized``, ...).
+        paused: whether recording is paused, if it says.
+        raw: the whole reply, for ``--json``.
+    """
+
+    vehicle: str
+    server: str | None = None
+    directory: str | None = None
+    session: str | None = None
+    counters: Mapping[str, int] = field(default_factory=dict)
+    last_error: str = ""
+    commands: tuple[CommandOutcome, ...] = ()
+    disk_free: int | None = None
+    disk_total: int | None = None
+    clock: Mapping[str, Any] = field(default_factory=dict)
+    paused: bool | None = None
+    raw: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def losses(self) -> int:
+        """Samples lost (the ``lost`` counter; ``missed`` ones of logged variables are in it)."""
+        return self.counters.get("lost", 0)
+
+    @property
+    def clock_synchronized(self) -> bool | None:
+        """Whether the vehicle's clock is synchronised, if the recorder says."""
+        value = self.clock.get("synchronized")
+        return value if isinstance(value, bool) else None
+
+    @classmethod
+    def from_json(cls, data: bytes, server: str | None = None) -> VehicleStatus:
+        """Read a status reply.
+
+        Raises:
+            FormatError: not a JSON object, too large, or without a vehicle name.
+        """
+        if len(data) > MAX_STATUS:
+            msg = f"the status reply is {len(data)} bytes long; at most {MAX_STATUS}"
+            raise FormatError(msg)
+        try:
+            obj = json.loads(data)
+        except (ValueError, RecursionError) as err:
+            msg = f"the status reply is not JSON: {str(err)[:80]}"
+            raise FormatError(msg) from None
+        if not isinstance(obj, dict):
+            msg = "the status reply is not a JSON object"
+            raise FormatError(msg)
+        vehicle = _text(obj.get("vehicle"))
+        if not vehicle:
+            msg = "the status reply names no vehicle"
+            raise FormatError(msg)
+        counters = {
+            name: found
+            for name, value in obj.items()
+            if isinstance(name, str) and (found := _count(value)) is not None
+        }
+        ring = obj.get("commands")
+        commands = tuple(
+            CommandOutcome.from_json(item)
+            for item in (ring if isinstance(ring, list) else [])[-MAX_COMMANDS:]
+            if isinstance(item, dict)
+        )
+        disk = obj.get("disk")
+        disk = disk if isinstance(disk, dict) else {}
+        clock = obj.get("clock")
+        paused = obj.get("paused")
+        directory = _text(obj.get("directory"))
+        session = _text(obj.get("session"))
+        if session is None and directory:
+            session = directory.rstrip("/").rsplit("/", 1)[-1] or None  # as LOGGER_DIRECTORY
+        return cls(
+            vehicle=vehicle,
+            server=server,
+            directory=directory,
+            session=session,
+            counters=counters,
+            last_error=_text(obj.get("last_error")) or "",
+            commands=commands,
+            disk_free=_count(disk.get("free")),
+            disk_total=_count(disk.get("total")),
+            clock=clock if isinstance(clock, dict) else {},
+            paused=paused if isinstance(paused, bool) else None,
+            raw=obj,
+        )
