@@ -234,6 +234,15 @@ def replay(
             rich_help_panel=_PANEL,
         ),
     ] = 1.0,
+    into_live: Annotated[
+        bool,
+        typer.Option(
+            "--into-live",
+            help="Publish into the keys of a vehicle whose recorder is running now (its live"
+            " log gets the replayed entries). Without it such a replay is refused.",
+            rich_help_panel=_PANEL,
+        ),
+    ] = False,
     root: Root = "fleet",
     mode: Mode = None,
     connect: Connect = None,
@@ -250,7 +259,10 @@ def replay(
     time, each under its own vehicle. In a terminal: space pauses, arrows seek, +/- change
     the rate, n steps one entry, q quits. Remotely: query
     <root>/V/@fleetlog/replay/control?cmd=pause|resume|seek;t=S|rate;x=R|step|stop, and
-    follow <root>/V/@fleetlog/replay/status.
+    follow <root>/V/@fleetlog/replay/status (or use fleetlog replay-ctl).
+
+    A replay into a vehicle that is live now (its recorder runs) is refused: use --prefix
+    or another --root to replay beside it, or --into-live to replay into it.
     """
     key_root = checked_root(root)
     zopts = session_options(mode, connect, listen, config, no_multicast_scouting)
@@ -277,6 +289,7 @@ def replay(
             errors="skip" if skip_bad_lines else "raise",
             cache=cache_dir,
             announce=lambda text: console.print(f"fleetlog: {text}", markup=False),
+            into_live=into_live,
         )
     )
     service.open_inputs()

@@ -22,10 +22,12 @@ from fleetlog.replayer.engine import Player, PlayOptions
 from fleetlog.replayer.inputs import RemoteSpec, ReplayInput, open_inputs
 from fleetlog.replayer.remote import default_cache, fetch_remote
 from fleetlog.replayer.report import Summary
+from fleetlog.shore.discovery import QUIET, Discovery
 from fleetlog.storage.readers import Errors
 from fleetlog.transport.replay import ReplayLink
 from fleetlog.transport.session import SessionOptions, open_session
 from fleetlog.wire.message import Kind, MoosMessage
+from fleetlog.wire.query import RECORDER_TOKEN
 
 __all__ = ["ReplayConfig", "ReplayService"]
 
@@ -52,6 +54,8 @@ class ReplayConfig:
         cache: where remote inputs (``V:latest``, ``V:SESSION``) are fetched to; None for
             ``~/.cache/fleetlog/replay``.
         announce: told, in a sentence, what is being fetched.
+        into_live: publish into the keys of a vehicle whose recorder is running now;
+            without it such a replay is refused (``--prefix`` keeps replays apart).
     """
 
     inputs: Sequence[str]
@@ -64,6 +68,7 @@ class ReplayConfig:
     errors: Errors = "raise"
     cache: Path | None = None
     announce: Callable[[str], None] | None = None
+    into_live: bool = False
 
 
 class ReplayService:
@@ -159,6 +164,7 @@ class ReplayService:
                 keyboard or a display).
 
         Raises:
+            ReplayError: a vehicle replayed into is live now, without ``into_live``.
             TransportError: the session cannot be opened or used.
             StorageError: an input cannot be read.
             FormatError: an input has a malformed line (names the file and line).
@@ -167,22 +173,59 @@ class ReplayService:
         try:
             session = open_session(self.config.zenoh)
             try:
-                self._link = ReplayLink(session, self.config.root, player.vehicles)
+                # Watching the fleet starts now, so the wait for subscribers counts for it.
+                live = None if self.config.into_live else Discovery(session, self.config.root)
                 try:
-                    return self._play(player, self._link, on_ready)
+                    self._link = ReplayLink(session, self.config.root, player.vehicles)
+                    try:
+                        return self._play(player, self._link, on_ready, live)
+                    finally:
+                        self._link.close()
                 finally:
-                    self._link.close()
+                    if live is not None:
+                        live.close()
             finally:
                 session.close()
         finally:
             self.close_inputs()
 
+    def _refuse_live(self, discovery: Discovery, vehicles: Sequence[str]) -> None:
+        """Refuse to publish into the keys of a vehicle whose recorder runs now.
+
+        Its live log would take the replayed entries for its own (and, through a bridge,
+        its MOOSDB too). The fleet is watched as every shore command watches it (until no
+        new vehicle appeared for a moment, at least 0.3 s), so a vehicle whose token
+        arrives a moment late is still seen.
+
+        Raises:
+            ReplayError: such a vehicle is up.
+        """
+        view = discovery.wait(wait=max(self.config.wait, QUIET))
+        live = [v for v in dict.fromkeys(vehicles) if RECORDER_TOKEN in view.vehicles.get(v, ())]
+        if live:
+            names = ", ".join(live)
+            example = live[0]
+            msg = (
+                f"vehicle {names} {'is' if len(live) == 1 else 'are'} live now (a recorder"
+                f" records {'it' if len(live) == 1 else 'them'}): the replay would land in its"
+                f" live log. Replay beside it with --prefix (--prefix sim_ publishes as"
+                f" sim_{example}) or another --root, or give --into-live to replay into it (to"
+                " have that recorder record the replay)"
+            )
+            raise ReplayError(msg)
+
     def _play(
-        self, player: Player, link: ReplayLink, on_ready: Callable[[Player], None] | None
+        self,
+        player: Player,
+        link: ReplayLink,
+        on_ready: Callable[[Player], None] | None,
+        live: Discovery | None,
     ) -> Summary:
+        self.missing = link.wait_for_subscribers(self.config.wait)
+        if live is not None:
+            self._refuse_live(live, player.vehicles)
         link.on_choke(player.heartbeat)
         link.serve(self._control, lambda: player.status().to_dict())
-        self.missing = link.wait_for_subscribers(self.config.wait)
         player.idle_hooks.append(lambda: link.publish_status(player.status().to_dict()))
         # The player spins before each entry, holding the GIL; a short switch interval lets
         # the callback and status threads in within a millisecond instead of five.

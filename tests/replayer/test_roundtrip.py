@@ -148,6 +148,7 @@ def test_replay_into_a_second_recorder_gives_the_same_session(
             str(original),
             "--prefix",
             "replay_",
+            "--into-live",  # replay_alpha's recorder runs: it is there to record the replay
             "--exclude-source",
             "pLogger",
             "--no-keys",
