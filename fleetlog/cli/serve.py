@@ -25,7 +25,9 @@ from fleetlog.cli.options import (
 )
 from fleetlog.errors import UsageError
 from fleetlog.query.server import LogServer
+from fleetlog.query.standby import Standby
 from fleetlog.storage.catalog import ALOG_SUFFIXES, LogCatalog
+from fleetlog.transport.queries import ZenohSession
 from fleetlog.transport.session import open_session
 
 __all__ = ["serve"]
@@ -58,6 +60,15 @@ def serve(
             " [default: the one in LOGROOT, else in its parent].",
         ),
     ] = None,
+    standby: Annotated[
+        bool,
+        typer.Option(
+            "--standby",
+            help="Serve only while no recorder of the vehicle serves its logs: run it beside"
+            " the recorder, on its log root, so the logs stay reachable after the recorder"
+            " stops (a fetch --follow then ends verified).",
+        ),
+    ] = False,
     root: Root = "fleet",
     mode: Mode = None,
     connect: Connect = None,
@@ -68,7 +79,8 @@ def serve(
     """Serve the MOOS log sessions under LOGROOT to the shore, as a recorder does.
 
     Works on directories written by real pLogger as well as by fleetlog. Stop it with Ctrl-C
-    or SIGTERM.
+    or SIGTERM. With --standby it runs beside the vehicle's recorder and takes over when the
+    recorder stops, so a vehicle's logs stay reachable whatever the recorder does.
     """
     key_root = checked_root(root)
     zopts = session_options(mode, connect, listen, config, no_multicast_scouting)
@@ -93,28 +105,57 @@ def serve(
     signal.signal(signal.SIGTERM, on_signal)
     session = open_session(zopts)
     try:
+        if standby:
+            _standby(session, catalog, key_root, name, log_root, stop)
+            return
         with LogServer(session, catalog, root=key_root, announce=True):
-            sessions = catalog.session_names()
-            latest = catalog.latest()
-            if not sessions:
-                # A session directory given as LOGROOT is the usual slip: say what to serve.
-                inner = any(p.name.endswith(ALOG_SUFFIXES) for p in log_root.iterdir())
-                advice = (
-                    f"; it is a session itself: serve {log_root.resolve().parent}" if inner else ""
-                )
-                print(
-                    f"fleetlog: warning: {log_root} holds no session directory (a directory"
-                    f" with an .alog, .alog.gz or .alog.zst){advice}",
-                    file=sys.stderr,
-                )
-            print(
-                f"fleetlog: serving {log_root} as vehicle {name!r}: {len(sessions)} session(s),"
-                f" latest {latest.session or '-'} ({latest.how}) (Ctrl-C to stop)",
-                file=sys.stderr,
-                flush=True,
-            )
+            _announce(catalog, log_root, name)
             while not stop.wait(0.5):
                 pass
     finally:
         session.close()
-    print("fleetlog: stopped serving", file=sys.stderr)
+        print("fleetlog: stopped serving", file=sys.stderr)
+
+
+def _announce(catalog: LogCatalog, log_root: Path, name: str) -> None:
+    sessions = catalog.session_names()
+    latest = catalog.latest()
+    if not sessions:
+        # A session directory given as LOGROOT is the usual slip: say what to serve.
+        inner = any(p.name.endswith(ALOG_SUFFIXES) for p in log_root.iterdir())
+        advice = f"; it is a session itself: serve {log_root.resolve().parent}" if inner else ""
+        print(
+            f"fleetlog: warning: {log_root} holds no session directory (a directory"
+            f" with an .alog, .alog.gz or .alog.zst){advice}",
+            file=sys.stderr,
+        )
+    print(
+        f"fleetlog: serving {log_root} as vehicle {name!r}: {len(sessions)} session(s),"
+        f" latest {latest.session or '-'} ({latest.how}) (Ctrl-C to stop)",
+        file=sys.stderr,
+        flush=True,
+    )
+
+
+def _standby(
+    session: ZenohSession,
+    catalog: LogCatalog,
+    root: str,
+    name: str,
+    log_root: Path,
+    stop: threading.Event,
+) -> None:
+    def on_change(serving: bool, why: str) -> None:
+        if serving:
+            print(f"fleetlog: {why}: taking over", file=sys.stderr, flush=True)
+            _announce(catalog, log_root, name)
+        else:
+            print(f"fleetlog: standing by: {why}", file=sys.stderr, flush=True)
+
+    print(
+        f"fleetlog: standing by for vehicle {name!r}'s recorder; serving {log_root} whenever"
+        " it does not (Ctrl-C to stop)",
+        file=sys.stderr,
+        flush=True,
+    )
+    Standby(session, catalog, root=root, vehicle=name, on_change=on_change).run(stop)
