@@ -46,8 +46,8 @@ from fleetlog.transport.queries import (
     ServiceQueryable,
     ZenohSession,
     declare_token,
+    session_zid,
 )
-from fleetlog.transport.services import zenoh_id
 from fleetlog.wire.keys import DEFAULT_ROOT, check_root, service_key
 from fleetlog.wire.query import (
     FILE,
@@ -151,7 +151,7 @@ class LogServer:
         self.vehicle = vehicle if vehicle is not None else catalog.vehicle
         self.announce = announce
         #: this process's Zenoh id: replies name it, and ``server=ZID`` requests match it
-        self.zid = zenoh_id(session)
+        self.zid = session_zid(session)
         self._recorder = None if announce else self.zid
         self.stats: dict[str, int] = {"requests": 0, "errors": 0, "refused": 0, "bytes": 0}
         self._stats_lock = threading.Lock()

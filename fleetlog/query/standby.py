@@ -24,8 +24,8 @@ from collections.abc import Callable
 from fleetlog.errors import FleetlogError, FormatError
 from fleetlog.query.server import LogServer
 from fleetlog.storage.catalog import LogCatalog
-from fleetlog.transport.queries import ZenohSession, start_query
-from fleetlog.transport.services import TokenWatch, zenoh_id
+from fleetlog.transport.queries import ZenohSession, session_zid, start_query
+from fleetlog.transport.services import TokenWatch
 from fleetlog.wire.keys import service_key
 from fleetlog.wire.query import LATEST, RECORDER_TOKEN, LatestInfo
 
@@ -70,7 +70,7 @@ class Standby:
         self.vehicle = vehicle
         self.settle = settle
         self._on_change = on_change or (lambda serving, why: None)
-        self._zid = zenoh_id(session)
+        self._zid = session_zid(session)
         self._server: LogServer | None = None
 
     @property

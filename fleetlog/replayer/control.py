@@ -2,15 +2,20 @@ r"""Commands that steer a replay, and the two ways they arrive: keys and remote 
 
 The player takes :data:`Command` values from any thread. A terminal sends them through
 :class:`KeyDecoder` (space pauses and resumes, the arrows seek, ``+``/``-`` change the rate,
-``n`` steps one entry), a UI through the Zenoh control queryable, whose parameters
-:func:`parse_query` reads::
+``n`` steps one entry), a UI or ``fleetlog replay-ctl`` through the Zenoh control queryable,
+which speaks fleetlog's one control schema (docs/wire.md, "Control"): a JSON request
+``{"cmd": "seek", "t": 120}`` in the query's payload, or the same as selector parameters,
+read by :func:`parse_request`::
 
     <root>/<V>/@fleetlog/replay/control?cmd=pause
-    ...?cmd=resume | cmd=toggle | cmd=stop
+    ...?cmd=resume | cmd=toggle | cmd=stop | cmd=status
     ...?cmd=seek;t=120        (seconds from the replay's origin, as the display shows)
     ...?cmd=seek;dt=-5        (relative)
     ...?cmd=rate;x=2          (0.1 ... 100, or x=fast; x=+ and x=- move along the ladder)
     ...?cmd=step              (the next entry; n=N entries, or dt=S seconds of log time)
+
+The reply is ``{"ok", "cmd", "did", "why"}`` with the status after the command beside them
+(``state``, ``position``, ``rate``, ...; :func:`describe` words ``did``).
 """
 
 from __future__ import annotations
@@ -19,12 +24,14 @@ import math
 from collections.abc import Mapping
 from dataclasses import dataclass
 
-from fleetlog.errors import ReplayError
+from fleetlog.errors import FormatError, ReplayError
+from fleetlog.wire.control import parse_control_request
 
 __all__ = [
     "MAX_RATE",
     "MIN_RATE",
     "RATES",
+    "REPLAY_COMMANDS",
     "Command",
     "KeyDecoder",
     "Pause",
@@ -35,14 +42,30 @@ __all__ = [
     "Stop",
     "Toggle",
     "check_rate",
+    "describe",
     "next_rate",
     "parse_query",
+    "parse_request",
 ]
 
 MIN_RATE = 0.1
 MAX_RATE = 100.0
 #: The rates ``+`` and ``-`` move between; past the top is "as fast as possible".
 RATES = (0.1, 0.2, 0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0)
+#: The replay's control commands and the arguments each may take (all optional).
+REPLAY_COMMANDS: Mapping[str, tuple[str, ...]] = {
+    "pause": (),
+    "resume": (),
+    "play": (),
+    "toggle": (),
+    "stop": (),
+    "seek": ("t", "dt"),
+    "rate": ("x",),
+    "step": ("n", "dt"),
+    "status": (),
+}
+#: Arguments a JSON request may give as numbers.
+_NUMBERS = frozenset({"t", "dt", "x", "n"})
 
 
 @dataclass(frozen=True, slots=True)
@@ -206,6 +229,59 @@ def parse_query(params: Mapping[str, str]) -> Command:
     known = "pause, resume, toggle, seek, rate, step, stop"
     msg = f"unknown replay command cmd={cmd!r}; known: {known}" if cmd else f"give cmd=: {known}"
     raise ReplayError(msg)
+
+
+def parse_request(payload: bytes | None, parameters: str) -> tuple[str, Command | None]:
+    """Read a control request: a JSON payload, or selector parameters (``;`` or ``&``).
+
+    Returns:
+        The command's name and the command (None for ``status``, which changes nothing).
+
+    Raises:
+        FormatError: the request is malformed (not JSON, too large, an unknown command or
+            argument, a value that is not a number where one is needed...).
+    """
+    request = parse_control_request(
+        payload,
+        parameters.replace("&", ";"),
+        commands=REPLAY_COMMANDS,
+        optional=True,
+        numbers=_NUMBERS,
+    )
+    if request.cmd == "status":
+        return request.cmd, None
+    try:
+        return request.cmd, parse_query({"cmd": request.cmd, **request.args})
+    except ReplayError as err:
+        raise FormatError(str(err)) from None
+
+
+def _clock(seconds: float) -> str:
+    minutes, rest = divmod(max(seconds, 0.0), 60.0)
+    return f"{int(minutes)}:{rest:04.1f}"
+
+
+def describe(cmd: str, status: Mapping[str, object]) -> str:
+    """Say in one sentence where the replay is after ``cmd`` (a reply's ``did``)."""
+    offset = status.get("offset")
+    where = _clock(offset) if isinstance(offset, int | float) else "?"
+    end = status.get("end")
+    if isinstance(end, int | float):
+        where += f" of {_clock(end)}"
+    rate = status.get("rate")
+    pace = "as fast as possible" if rate == "fast" else f"at {rate}x"
+    state = status.get("state")
+    sentences = {
+        "pause": f"{state} at {where}",
+        "resume": f"{state} from {where} {pace}",
+        "play": f"{state} from {where} {pace}",
+        "toggle": f"{state} at {where}",
+        "stop": f"{state} at {where}",
+        "seek": f"moved to {where} ({state})",
+        "rate": f"{state} {pace} at {where}",
+        "step": f"stepped to {where} ({state})",
+    }
+    return sentences.get(cmd, f"{state} at {where} {pace}")
 
 
 class KeyDecoder:

@@ -9,15 +9,14 @@ the session closes (a short-lived publisher loses its tail otherwise).
 from __future__ import annotations
 
 import sys
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from concurrent.futures import TimeoutError as FutureTimeout
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 from fleetlog.errors import ReplayError
 from fleetlog.replayer.clock import Clock, RealClock
-from fleetlog.replayer.control import parse_query
+from fleetlog.replayer.control import describe, parse_request
 from fleetlog.replayer.engine import Player, PlayOptions
 from fleetlog.replayer.inputs import RemoteSpec, ReplayInput, open_inputs
 from fleetlog.replayer.remote import default_cache, fetch_remote
@@ -26,6 +25,7 @@ from fleetlog.shore.discovery import QUIET, Discovery
 from fleetlog.storage.readers import Errors
 from fleetlog.transport.replay import ReplayLink
 from fleetlog.transport.session import SessionOptions, open_session
+from fleetlog.wire.control import Outcome
 from fleetlog.wire.message import Kind, MoosMessage
 from fleetlog.wire.query import RECORDER_TOKEN
 
@@ -242,17 +242,24 @@ class ReplayService:
         self.unconfirmed = link.confirm_delivery(self.config.confirm)
         return summary
 
-    def _control(self, params: Mapping[str, str]) -> dict[str, Any]:
+    def _control(self, payload: bytes | None, parameters: str) -> bytes:
+        """Run one control request (docs/wire.md, "Control"); return the reply's JSON.
+
+        Raises:
+            FormatError: the request is malformed (answered with an error reply).
+        """
+        cmd, command = parse_request(payload, parameters)
         player = self.player
         if player is None:
-            msg = "the replay has not started"
-            raise ReplayError(msg)
-        future = player.submit(parse_query(params))
+            return Outcome.refused(cmd, "the replay has not started").reply()
+        if command is None:
+            doc = player.status().to_dict()
+            return Outcome.done(cmd, describe(cmd, doc), **doc).reply()
+        future = player.submit(command)
         try:
             doc = future.result(COMMAND_TIMEOUT).to_dict()
         except FutureTimeout:
-            msg = "the player did not take the command in time"
-            raise ReplayError(msg) from None
+            return Outcome.refused(cmd, "the player did not take the command in time").reply()
         if self._link is not None:
             self._link.publish_status(doc)  # a UI following the status sees the change now
-        return doc
+        return Outcome.done(cmd, describe(cmd, doc), **doc).reply()

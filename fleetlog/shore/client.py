@@ -27,12 +27,15 @@ and a ``fleetlog serve``): replies name their process (``server``, its Zenoh id)
 
 from __future__ import annotations
 
+import json
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Mapping
 from types import TracebackType
+from typing import Any
 
 from fleetlog.errors import FormatError, QueryError
 from fleetlog.moos.alog import BinaryRef, Entry, parse_binary_ref
+from fleetlog.shore.control import ControlReply
 from fleetlog.shore.discovery import QUIET, WAIT, Discovery, FleetView
 from fleetlog.shore.status import VehicleStatus
 from fleetlog.transport.queries import PendingQuery, ReplyItem, ZenohSession, start_query
@@ -385,11 +388,15 @@ class FleetClient:
 
     # -- queries
 
-    def _get(self, selector: str, timeout: float) -> PendingQuery:
-        return start_query(self.zenoh, selector, timeout=timeout)
+    def _get(self, selector: str, timeout: float, payload: bytes | None = None) -> PendingQuery:
+        return start_query(self.zenoh, selector, timeout=timeout, payload=payload)
 
     def _replies(
-        self, vehicle: str, selector: str, timeout: float | None = None
+        self,
+        vehicle: str,
+        selector: str,
+        timeout: float | None = None,
+        payload: bytes | None = None,
     ) -> list[ReplyItem]:
         """Run a query to one vehicle; return its good replies.
 
@@ -401,7 +408,7 @@ class FleetClient:
         while True:
             replies: list[ReplyItem] = []
             error: str | None = None
-            for reply in self._get(selector, timeout or self.timeout):
+            for reply in self._get(selector, timeout or self.timeout, payload):
                 if reply.error is None:
                     replies.append(reply)
                 elif error is None:
@@ -419,6 +426,48 @@ class FleetClient:
 
     def _samples(self, vehicle: str, selector: str, timeout: float | None = None) -> list[bytes]:
         return [reply.payload for reply in self._replies(vehicle, selector, timeout)]
+
+    # -- control
+
+    def control(
+        self,
+        vehicle: str,
+        request: Mapping[str, Any],
+        *,
+        replay: bool = False,
+        timeout: float | None = None,
+    ) -> list[ControlReply]:
+        """Send a control request to a vehicle's recorder, or to the replay playing it.
+
+        The request is ``{"cmd": NAME, ...arguments}`` (docs/wire.md, "Control"); each
+        process that answers gives one reply (two recorders of one vehicle both act).
+
+        Raises:
+            QueryError: nothing answered, an error reply (a malformed request), or a reply
+                that is not a control reply.
+        """
+        parts = ("replay", "control") if replay else ("control",)
+        selector = service_key(self.root, vehicle, *parts)
+        payload = json.dumps(dict(request)).encode()
+        if replay:
+            replies = list(self._get(selector, timeout or self.timeout, payload))
+            errors = [r.error for r in replies if r.error is not None]
+            if errors:
+                msg = f"the replay of {vehicle}: {errors[0]}"
+                raise QueryError(msg)
+            if not replies:
+                msg = f"no replay plays vehicle {vehicle!r} now (nothing answered {selector})"
+                raise QueryError(msg)
+        else:
+            replies = self._replies(vehicle, selector, timeout, payload)
+        out: list[ControlReply] = []
+        for reply in replies:
+            try:
+                out.append(ControlReply.from_json(reply.payload, reply.replier))
+            except FormatError as err:
+                msg = f"vehicle {vehicle}: {err}"
+                raise QueryError(msg) from None
+        return out
 
     # -- recorder status
 

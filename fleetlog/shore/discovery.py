@@ -33,7 +33,7 @@ from fleetlog.transport.services import TokenWatch
 from fleetlog.wire.keys import fleet_service_selector, parse_service_key
 from fleetlog.wire.query import RECORDER_TOKEN, SERVE_TOKEN
 
-__all__ = ["QUIET", "WAIT", "Discovery", "FleetView", "Settle"]
+__all__ = ["QUIET", "REPLAY_TOKEN", "SERVICES", "WAIT", "Discovery", "FleetView", "Settle"]
 
 #: seconds without a new token or peer after which the fleet is taken as complete
 QUIET = 0.3
@@ -41,6 +41,8 @@ QUIET = 0.3
 WAIT = 3.0
 #: the liveliness tokens that make a vehicle "up"
 SERVICES = (RECORDER_TOKEN, SERVE_TOKEN)
+#: the liveliness token of a running replay, one per vehicle it plays
+REPLAY_TOKEN = "replay"
 #: how often the peers are looked at while nothing else happens
 _PEER_POLL = 0.02
 
@@ -132,6 +134,8 @@ class Discovery:
         root: the key root.
         quiet: see :class:`Settle`.
         clock: monotonic seconds (tests pass a fake one).
+        services: the tokens that count (``recorder`` and ``serve``: a vehicle is up;
+            ``replay``: a replay plays it).
 
     Raises:
         TransportError: the liveliness subscription failed.
@@ -144,9 +148,11 @@ class Discovery:
         *,
         quiet: float = QUIET,
         clock: Callable[[], float] = time.monotonic,
+        services: tuple[str, ...] = SERVICES,
     ) -> None:
         self.root = root
         self.quiet = quiet
+        self.services = services
         self._clock = clock
         self._started = clock()
         self._tokens: dict[str, set[str]] = {}
@@ -164,7 +170,7 @@ class Discovery:
             vehicle, parts = parse_service_key(self.root, key)
         except FormatError:
             return False
-        if len(parts) != 1 or parts[0] not in SERVICES:
+        if len(parts) != 1 or parts[0] not in self.services:
             return False
         services = self._tokens.get(vehicle)
         if alive:

@@ -6,11 +6,15 @@ Keys, for each vehicle ``V`` the replay publishes to (after ``--prefix``):
 * ``<root>/V/var/PLAYBACK_CHOKE``: subscribed; a client's heartbeat (a double, its clock's
   time). Samples that are themselves replays (their attachment carries an original time) are
   ignored, so replaying a log that holds PLAYBACK_CHOKE never chokes the replay itself;
-* ``<root>/V/@fleetlog/replay/control``: a queryable; ``?cmd=pause`` and so on
-  (:func:`fleetlog.replayer.control.parse_query`), parameters separated by ``;`` (Zenoh's
-  separator) or ``&``. It answers the status after the command as JSON, or an error reply;
+* ``<root>/V/@fleetlog/replay/control``: a queryable speaking fleetlog's control schema
+  (docs/wire.md, "Control"): a JSON request in the payload (at most 64 KiB) or selector
+  parameters (``?cmd=pause``; ``;`` or ``&`` between them), read by
+  :func:`fleetlog.replayer.control.parse_request`. It answers ``{"ok", "cmd", "did", "why"}``
+  with the status after the command, or an error reply for a malformed request;
 * ``<root>/V/@fleetlog/replay/status``: the status as JSON, published a few times a second
-  and answered to queries.
+  and answered to queries;
+* ``<root>/V/@fleetlog/replay``: a liveliness token while the replay runs, so
+  ``fleetlog replay-ctl`` finds running replays as the shore finds vehicles.
 
 Every vehicle's control key steers the same replay: the vehicles share one clock.
 """
@@ -19,9 +23,8 @@ from __future__ import annotations
 
 import contextlib
 import json
-import re
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import zenoh
@@ -39,25 +42,17 @@ from fleetlog.wire.message import (
     kind_of_encoding,
 )
 
-__all__ = ["CHOKE_VARIABLE", "ReplayLink", "parse_parameters"]
+__all__ = ["CHOKE_VARIABLE", "MAX_CONTROL", "ReplayLink"]
 
 #: The variable a client posts its heartbeat to (uPlayBack's PLAYBACK_CHOKE).
 CHOKE_VARIABLE = "PLAYBACK_CHOKE"
 _JSON = zenoh.Encoding("application/json")
-_SEPARATORS = re.compile(r"[;&]")
 
-#: ``handler(parameters) -> status document``; raises a FleetlogError to refuse.
-ControlHandler = Callable[[Mapping[str, str]], dict[str, Any]]
-
-
-def parse_parameters(text: str) -> dict[str, str]:
-    """Split a selector's parameters (``a=1;b=2``, or ``a=1&b=2``) into a dict."""
-    out: dict[str, str] = {}
-    for part in _SEPARATORS.split(text):
-        if part:
-            name, _, value = part.partition("=")
-            out[name.strip()] = value.strip()
-    return out
+#: ``handler(payload, parameters) -> reply JSON``; raises a FleetlogError for a malformed
+#: request (answered with an error reply).
+ControlHandler = Callable[[bytes | None, str], bytes]
+#: the largest control request read (docs/wire.md, "Control")
+MAX_CONTROL = 64 << 10
 
 
 class ReplayLink:
@@ -179,20 +174,27 @@ class ReplayLink:
             TransportError: a declaration failed.
         """
 
-        def answer(query: zenoh.Query, document: Callable[[], dict[str, Any]]) -> None:
+        def answer(query: zenoh.Query, document: Callable[[], bytes]) -> None:
             try:
-                doc = document()
-            except Exception as err:  # a refusal, or a bug: either way the query gets an answer
-                query.reply_err(str(err))
+                body = document()
+            except Exception as err:  # malformed, or a bug: either way the query gets an answer
+                with contextlib.suppress(zenoh.ZError):
+                    query.reply_err(str(err))
                 return
-            query.reply(query.key_expr, json.dumps(doc), encoding=_JSON)
+            with contextlib.suppress(zenoh.ZError):
+                query.reply(query.key_expr, body, encoding=_JSON)
 
         def on_control(query: zenoh.Query) -> None:
-            params = parse_parameters(str(query.parameters))
-            answer(query, lambda: control(params))
+            payload = query.payload
+            if payload is not None and len(payload) > MAX_CONTROL:
+                data: bytes | None = bytes(MAX_CONTROL + 1)  # refused unread, by its size
+            else:
+                data = None if payload is None else payload.to_bytes()
+            parameters = str(query.parameters)
+            answer(query, lambda: control(data, parameters))
 
         def on_status(query: zenoh.Query) -> None:
-            answer(query, status)
+            answer(query, lambda: json.dumps(status()).encode())
 
         for vehicle in self.vehicles:
             for name, handler in (("control", on_control), ("status", on_status)):
@@ -202,6 +204,9 @@ class ReplayLink:
             key = service_key(self.root, vehicle, "replay", "status")
             with translate_zerror(f"publisher on {key!r}"):
                 self._status_pubs.append(self.session.declare_publisher(key, encoding=_JSON))
+            key = service_key(self.root, vehicle, "replay")
+            with translate_zerror(f"liveliness token {key!r}"):
+                self._declared.append(self.session.liveliness().declare_token(key))
 
     def publish_status(self, document: dict[str, Any]) -> None:
         """Publish the status on every vehicle's status key (dropped if nobody keeps up)."""

@@ -20,13 +20,7 @@ __all__ = [
     "live_vehicles",
     "refusal_hint",
     "routers_connected",
-    "zenoh_id",
 ]
-
-
-def zenoh_id(session: zenoh.Session) -> str:
-    """Return the session's Zenoh id (hex), the name the network knows the process by."""
-    return str(session.info.zid())
 
 
 class TokenWatch:

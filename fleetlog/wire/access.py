@@ -293,6 +293,13 @@ KEY_RULES: tuple[KeyRule, ...] = (
         replay={A},
     ),
     _rule(
+        "@fleetlog/replay",
+        "<root>/V/@fleetlog/replay",
+        vehicle=NOTHING,
+        operator={W},  # fleetlog replay-ctl finds running replays by their tokens
+        replay={T, W},
+    ),
+    _rule(
         "@fleetlog/replay/control",
         "<root>/V/@fleetlog/replay/control",
         vehicle=NOTHING,

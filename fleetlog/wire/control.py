@@ -79,7 +79,12 @@ class ControlRequest:
 
 
 def parse_control_request(
-    payload: bytes | None, parameters: str, *, commands: Mapping[str, tuple[str, ...]] | None = None
+    payload: bytes | None,
+    parameters: str,
+    *,
+    commands: Mapping[str, tuple[str, ...]] | None = None,
+    optional: bool = False,
+    numbers: frozenset[str] = frozenset(),
 ) -> ControlRequest:
     """Check a control query: its JSON payload, or else its selector parameters.
 
@@ -88,6 +93,10 @@ def parse_control_request(
         parameters: the selector's parameters (``cmd=note;key=site;value=bay``).
         commands: the commands the service takes, with their arguments (the recorder's by
             default).
+        optional: the arguments may be left out (the service checks which it needs; a
+            replay's ``seek`` takes ``t`` or ``dt``).
+        numbers: arguments that may also be JSON numbers, passed on as their decimal text
+            (as a selector parameter would give them).
 
     Raises:
         FormatError: the request is too large, not a JSON object, names no or an unknown
@@ -139,8 +148,10 @@ def parse_control_request(
         if name not in takes:
             msg = f"command {cmd!r} takes no argument {name[:40]!r}"
             raise FormatError(msg)
+        if name in numbers and _is_number(value):
+            value = repr(value)
         args[name] = _files(value) if name == "files" else _string(name, value)
-    missing = [name for name in takes if name not in args]
+    missing = [] if optional else [name for name in takes if name not in args]
     if missing:
         msg = f"command {cmd!r} needs {', '.join(repr(m) for m in missing)}"
         raise FormatError(msg)
@@ -154,6 +165,10 @@ def parse_control_request(
     if not (isinstance(when, int | float) and not isinstance(when, bool) and math.isfinite(when)):
         when = None
     return ControlRequest(cmd, args, _string("source", source), when, _clip(text))
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value)
 
 
 def _string(name: str, value: Any) -> str:

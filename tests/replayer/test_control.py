@@ -147,7 +147,7 @@ def test_pause_step_seek_rate_resume(
     assert doc["rate"] == 50
     bad, err = client.query(f"{CONTROL}?cmd=fly")
     assert bad is None
-    assert "unknown replay command" in err
+    assert "unknown command 'fly'" in err
     bad, err = client.query(f"{CONTROL}?cmd=rate;x=1000")
     assert "outside" in err
     client.command("cmd=resume")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import gzip
+import json
 import threading
 import time
 import tracemalloc
@@ -10,10 +11,12 @@ from pathlib import Path
 
 import pytest
 import zstandard
+from hypothesis import given, settings
+from hypothesis import strategies as st
 from replay_support import Line, MakeSession, write_session
 
 from fleetlog.cli.replay_terminal import format_status
-from fleetlog.errors import ReplayError
+from fleetlog.errors import FormatError, ReplayError
 from fleetlog.replayer.clock import FakeClock, RealClock
 from fleetlog.replayer.control import (
     KeyDecoder,
@@ -24,14 +27,15 @@ from fleetlog.replayer.control import (
     Step,
     Stop,
     Toggle,
+    describe,
     next_rate,
     parse_query,
+    parse_request,
 )
 from fleetlog.replayer.engine import Player, PlayOptions
 from fleetlog.replayer.inputs import open_inputs, parse_remote
 from fleetlog.replayer.report import Lateness, State, Status
 from fleetlog.storage.alogscan import read_head
-from fleetlog.transport.replay import parse_parameters
 from fleetlog.wire.message import MoosMessage
 
 # -- commands
@@ -82,10 +86,32 @@ def test_parse_query_refuses(params: dict[str, str], message: str) -> None:
         parse_query(params)
 
 
-def test_parameters_split_on_both_separators() -> None:
-    assert parse_parameters("cmd=seek;t=5") == {"cmd": "seek", "t": "5"}
-    assert parse_parameters("cmd=seek&t=5") == {"cmd": "seek", "t": "5"}
-    assert parse_parameters("") == {}
+def test_control_requests_as_json_or_parameters() -> None:
+    assert parse_request(None, "cmd=seek;t=5") == ("seek", Seek(5.0))
+    assert parse_request(None, "cmd=seek&dt=-5") == ("seek", Seek(by=-5.0))
+    assert parse_request(b'{"cmd": "seek", "t": 120}', "") == ("seek", Seek(120.0))
+    assert parse_request(b'{"cmd": "rate", "x": "fast"}', "") == ("rate", SetRate(None))
+    assert parse_request(b'{"cmd": "step", "n": 3}', "") == ("step", Step(3))
+    assert parse_request(b'{"cmd": "status"}', "") == ("status", None)
+    for payload, params, match in (
+        (None, "", "names no command"),
+        (b'{"cmd": "fly"}', "", "unknown command 'fly'"),
+        (b'{"cmd": "seek", "t": true}', "", "argument 't' is not a string"),
+        (b'{"cmd": "pause", "t": 1}', "", "takes no argument 't'"),
+        (None, "cmd=seek", "exactly one of t="),
+        (None, "cmd=rate;x=1000", "outside"),
+        (b"[1]", "", "not a JSON object"),
+        (b"x" * 70000, "", "at most"),
+    ):
+        with pytest.raises(FormatError, match=match):
+            parse_request(payload, params)
+
+
+def test_control_replies_say_what_was_done() -> None:
+    status = {"state": "paused", "offset": 75.5, "end": 120.0, "rate": 2.0}
+    assert describe("pause", status) == "paused at 1:15.5 of 2:00.0"
+    assert describe("rate", {**status, "state": "playing"}) == "playing at 2.0x at 1:15.5 of 2:00.0"
+    assert describe("seek", {**status, "end": None, "rate": "fast"}) == "moved to 1:15.5 (paused)"
 
 
 def test_keys() -> None:
@@ -302,3 +328,31 @@ def test_memory_does_not_grow_with_the_log(tmp_path: Path) -> None:
     # Ten times the entries, the same peak: what is held is the re-sort window, the
     # duplicate check's memory and the parser's buffers, all bounded; never the file.
     assert _peak(large) < 1.2 * _peak(small) + 100_000
+
+
+_json_values = st.recursive(
+    st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=20),
+    lambda inner: st.lists(inner, max_size=4) | st.dictionaries(st.text(max_size=6), inner),
+    max_leaves=20,
+)
+
+
+@settings(max_examples=300)
+@given(
+    st.one_of(
+        st.none(),
+        st.binary(max_size=64),
+        st.dictionaries(
+            st.sampled_from(["cmd", "t", "dt", "x", "n", "source", "time", "zz"]),
+            _json_values | st.sampled_from(["seek", "rate", "step", "pause", "status", "+"]),
+        ).map(lambda obj: json.dumps(obj).encode()),
+    ),
+    st.text(max_size=60),
+)
+def test_control_request_fuzz(payload: bytes | None, parameters: str) -> None:
+    """Whatever a peer sends, the replay's control reads a command or refuses it in words."""
+    try:
+        cmd, _ = parse_request(payload, parameters)
+    except FormatError:
+        return
+    assert cmd in ("pause", "resume", "play", "toggle", "stop", "seek", "rate", "step", "status")
