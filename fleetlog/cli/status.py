@@ -17,7 +17,7 @@ from fleetlog.cli.tables import console, human_size, plain
 from fleetlog.errors import QueryError
 from fleetlog.shore.client import FleetClient
 from fleetlog.shore.report import FleetReport
-from fleetlog.shore.status import COUNTERS, VehicleStatus
+from fleetlog.shore.status import COUNTERS, VehicleStatus, describe_command
 from fleetlog.wire.query import RECORDER_TOKEN
 
 __all__ = ["status"]
@@ -77,7 +77,7 @@ def _detail(found: VehicleStatus, conflict: bool) -> None:
         out.print(plain(f"last {min(len(found.commands), _SHOWN_COMMANDS)} command(s):"))
         for item in found.commands[-_SHOWN_COMMANDS:]:
             who = f" from {item.source}" if item.source else ""
-            out.print(plain(f"  {_when(item.time)} {item.via}{who}: {item.describe()}"))
+            out.print(plain(f"  {_when(item.time)} {item.via}{who}: {describe_command(item)}"))
 
 
 def _fleet_table(found: dict[str, list[VehicleStatus]], serve_only: list[str]) -> Table:

@@ -1,8 +1,9 @@
 """A recorder's status, as the shore reads it (``<root>/V/@fleetlog/status``, docs/wire.md).
 
 The reply comes from the network, so it is read defensively: every field is optional and
-checked for its type, numbers must be finite, texts are cut to a bounded length, and the
-``commands`` ring (the outcomes of the recorder's last commands) holds at most 64 entries.
+checked for its type, numbers must be finite, texts are cut to a bounded length, the whole
+reply is at most 1 MiB, and of the ``commands`` ring (the outcomes of the recorder's last
+commands, :class:`~fleetlog.wire.control.CommandRecord`) the last 64 readable entries are kept.
 A field this version does not know is kept in :attr:`VehicleStatus.raw` for ``--json``.
 """
 
@@ -15,8 +16,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from fleetlog.errors import FormatError
+from fleetlog.wire.control import CommandRecord
 
-__all__ = ["COUNTERS", "CommandOutcome", "VehicleStatus"]
+__all__ = ["COUNTERS", "VehicleStatus", "describe_command"]
 
 #: the counters a recorder reports, in the order a table shows them
 COUNTERS = (
@@ -59,50 +61,23 @@ def _count(value: Any) -> int | None:
     return value
 
 
-@dataclass(frozen=True)
-class CommandOutcome:
-    """What the recorder did with one command (an entry of its ``commands`` ring).
+def describe_command(record: CommandRecord) -> str:
+    """One line: the command, and what was done or why it was refused."""
+    what = record.text or record.cmd
+    if record.ok:
+        return f"{what}: {record.did or 'done'}"
+    return f"{what}: refused: {record.why or 'no reason given'}"
 
-    Attributes:
-        time: the command message's own time (seconds since the epoch), if known.
-        via: how it came: ``control``, ``PLOGGER_CMD``, ``LOGGER_RESTART``, ...
-        source: who sent it, as the sender said.
-        cmd: the command.
-        text: the command as received (cut short).
-        ok: it was done.
-        did: what was done, one sentence.
-        why: why it was refused.
-    """
 
-    time: float | None
-    via: str
-    source: str
-    cmd: str
-    text: str
-    ok: bool
-    did: str
-    why: str | None
-
-    @classmethod
-    def from_json(cls, obj: Mapping[str, Any]) -> CommandOutcome:
-        """Read one ring entry (missing or mistyped fields become empty)."""
-        return cls(
-            _number(obj.get("time")),
-            _text(obj.get("via")) or "",
-            _text(obj.get("source")) or "",
-            _text(obj.get("cmd")) or "",
-            _text(obj.get("text")) or "",
-            obj.get("ok") is True,
-            _text(obj.get("did")) or "",
-            _text(obj.get("why")),
-        )
-
-    def describe(self) -> str:
-        """One line: the command, and what was done or why it was refused."""
-        what = self.text or self.cmd
-        if self.ok:
-            return f"{what}: {self.did or 'done'}"
-        return f"{what}: refused: {self.why or 'no reason given'}"
+def _commands(ring: Any) -> tuple[CommandRecord, ...]:
+    """The ring's entries that can be read (a garbled one is left out), the last 64."""
+    out: list[CommandRecord] = []
+    for item in ring[-MAX_COMMANDS:] if isinstance(ring, list) else []:
+        try:
+            out.append(CommandRecord.from_json(item))
+        except FormatError:
+            continue
+    return tuple(out)
 
 
 @dataclass(frozen=True)
@@ -130,7 +105,7 @@ class VehicleStatus:
     session: str | None = None
     counters: Mapping[str, int] = field(default_factory=dict)
     last_error: str = ""
-    commands: tuple[CommandOutcome, ...] = ()
+    commands: tuple[CommandRecord, ...] = ()
     disk_free: int | None = None
     disk_total: int | None = None
     clock: Mapping[str, Any] = field(default_factory=dict)
@@ -175,12 +150,7 @@ class VehicleStatus:
             for name, value in obj.items()
             if isinstance(name, str) and (found := _count(value)) is not None
         }
-        ring = obj.get("commands")
-        commands = tuple(
-            CommandOutcome.from_json(item)
-            for item in (ring if isinstance(ring, list) else [])[-MAX_COMMANDS:]
-            if isinstance(item, dict)
-        )
+        commands = _commands(obj.get("commands"))
         disk = obj.get("disk")
         disk = disk if isinstance(disk, dict) else {}
         clock = obj.get("clock")

@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from fleetlog.errors import FormatError
-from fleetlog.shore.status import MAX_COMMANDS, MAX_TEXT, VehicleStatus
+from fleetlog.shore.status import MAX_COMMANDS, MAX_TEXT, VehicleStatus, describe_command
 from fleetlog.wire.query import (
     LatestInfo,
     SessionInfo,
@@ -42,8 +42,11 @@ def test_status_reads_counters_commands_disk_and_clock() -> None:
         "garbled": True,  # not a count either
         "last_error": "x" * 5000,
         "commands": [
-            {"time": 1.5, "via": "PLOGGER_CMD", "cmd": "restart", "ok": True, "did": "new dir"},
-            {"cmd": "pause", "ok": False, "why": "already paused", "text": "PAUSE"},
+            {"time": 1.5, "via": "PLOGGER_CMD", "source": "u", "cmd": "restart", "text": ""}
+            | {"ok": True, "did": "new dir", "why": None},
+            {"time": 2, "via": "control", "source": "", "cmd": "pause", "text": "PAUSE"}
+            | {"ok": False, "did": "", "why": "already paused"},
+            {"cmd": "pause"},  # garbled: left out
             "garbage",
         ],
         "disk": {"free": 1 << 30, "total": 1 << 32},
@@ -56,7 +59,7 @@ def test_status_reads_counters_commands_disk_and_clock() -> None:
     assert "skewed" not in found.counters
     assert "garbled" not in found.counters
     assert len(found.last_error) == MAX_TEXT
-    assert [c.describe() for c in found.commands] == [
+    assert [describe_command(c) for c in found.commands] == [
         "restart: new dir",
         "PAUSE: refused: already paused",
     ]
@@ -93,7 +96,8 @@ def test_status_fuzz(obj: dict[str, object], noise: bytes) -> None:
 
 
 def test_status_keeps_only_the_last_commands() -> None:
-    ring = [{"cmd": f"c{i}", "ok": True} for i in range(500)]
+    entry = {"time": 1, "via": "control", "source": "", "text": "", "did": "", "why": None}
+    ring = [{**entry, "cmd": f"c{i}", "ok": True} for i in range(500)]
     found = VehicleStatus.from_json(json.dumps({"vehicle": "a", "commands": ring}).encode())
     assert len(found.commands) == MAX_COMMANDS
     assert found.commands[-1].cmd == "c499"
