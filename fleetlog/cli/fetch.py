@@ -185,6 +185,8 @@ def _report(outcome: fetching.FetchOutcome) -> str:
     )
     if not outcome.complete:
         line += "\t(still being written: kept as .part; --follow waits for the end)"
+    elif outcome.state == "cut":
+        line += "\t(cut: its recorder died with it open; what it wrote is all there is)"
     return line
 
 
@@ -221,7 +223,9 @@ def fetch(
         bool,
         typer.Option(
             "--follow",
-            help="For a session still being written: keep fetching until it completes.",
+            help="For a session still being written: keep fetching until it ends (closed, or"
+            " cut by a crash), then verify. Run fleetlog serve --standby beside the recorder"
+            " so the end can still be fetched once the recorder stops.",
         ),
     ] = False,
     rate: Annotated[

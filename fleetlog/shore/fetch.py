@@ -16,7 +16,10 @@ pLogger writes), each through a :class:`~fleetlog.storage.download.PartFile`:
   file's is asked for at the start), and only then renamed to its real name;
 * a file of a session still being written stays a ``.part``: without ``follow`` the fetch
   takes what exists and returns; with ``follow`` it keeps fetching what is appended until the
-  session completes, then verifies and renames;
+  session ends (its metadata says ``closed``, or ``cut`` when its recorder died with it open;
+  a session without metadata, real pLogger's, when the vehicle calls it complete), then
+  verifies and renames. A recorder that stops stops serving: run ``fleetlog serve
+  --standby`` beside it and the follow rides out the handover and ends verified;
 * when the vehicle stops answering (link dropped, vehicle stopped) the range is retried with
   backoff for ``retry_for`` seconds; after that the fetch fails with the ``.part`` files in
   place, and the same command resumes them.
@@ -36,7 +39,8 @@ from typing import TypeVar
 from fleetlog.errors import QueryError, StorageError
 from fleetlog.shore.client import FleetClient, PendingRange, TransientQueryError
 from fleetlog.storage.download import PartFile, sha256_file
-from fleetlog.wire.query import DEFAULT_RANGE, FileInfo, FileMeta, check_component
+from fleetlog.wire.query import DEFAULT_RANGE, FileInfo, FileMeta, SessionInfo, check_component
+from fleetlog.wire.session_meta import CLOSED, CUT
 
 __all__ = ["FetchOutcome", "FileOutcome", "Progress", "fetch_session"]
 
@@ -74,6 +78,7 @@ class FetchOutcome:
         session: the session.
         directory: where its files are.
         complete: the session was complete on the vehicle when the fetch ended.
+        state: its metadata's state then (``open``, ``closed``, ``cut``), None without.
         received: bytes received over the network.
         seconds: how long it took.
         files: each file's outcome.
@@ -83,6 +88,7 @@ class FetchOutcome:
     session: str
     directory: Path
     complete: bool = False
+    state: str | None = None
     received: int = 0
     seconds: float = 0.0
     files: list[FileOutcome] = field(default_factory=list)
@@ -371,6 +377,11 @@ class _Transfer:
             self.part.close()
 
 
+def _ended(info: SessionInfo) -> bool:
+    """Whether a session is no longer written: marked closed or cut, or complete."""
+    return info.complete or info.state in (CLOSED, CUT)
+
+
 def fetch_session(
     client: FleetClient,
     vehicle: str,
@@ -435,6 +446,7 @@ def fetch_session(
                 ctx, lambda: client.session(vehicle, session, brief=True, server=server)
             )
             ctx.progress.total(vehicle, info.size)
+            outcome.state = info.state
             for remote in info.files:
                 transfer = transfers.get(remote.name)
                 if transfer is None:
@@ -442,7 +454,7 @@ def fetch_session(
                     transfers[remote.name] = transfer
                     transfer.prepare(remote, info.complete)
                 transfer.pull(remote.size)
-            if info.complete:
+            if _ended(info):
                 for transfer in transfers.values():
                     transfer.finish()
                 outcome.complete = True

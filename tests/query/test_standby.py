@@ -9,16 +9,19 @@ from __future__ import annotations
 
 import filecmp
 import json
+import signal
 from pathlib import Path
 
+import pytest
 from helpers import Proc, free_port, run_cli
 from query_support import wait_for
 
 ZENOH = ["--no-multicast-scouting"]
 
 
+@pytest.mark.parametrize("how", ["stopped", "killed"])
 def test_the_standby_takes_over_when_the_recorder_stops_and_a_follow_ends_verified(
-    tmp_path: Path, cli_env: dict[str, str]
+    how: str, tmp_path: Path, cli_env: dict[str, str]
 ) -> None:
     rec_end = f"tcp/127.0.0.1:{free_port()}"
     serve_end = f"tcp/127.0.0.1:{free_port()}"
@@ -55,9 +58,15 @@ def test_the_standby_takes_over_when_the_recorder_stops_and_a_follow_ends_verifi
         wait_for(lambda: any((out / session).glob("*.alog.part")), 20, "the follow to start")
         assert follow.proc.poll() is None, follow.stderr
 
-        assert recorder.stop() == 0
+        if how == "stopped":
+            assert recorder.stop() == 0  # the session is closed
+        else:
+            recorder.proc.send_signal(signal.SIGKILL)  # left open: cut
+            recorder.wait(10)
         standby.wait_for("taking over", timeout=15)
         assert follow.wait(timeout=60) == 0, follow.stderr
+        meta = json.loads((logs / session / ".fleetlog-session.json").read_text())
+        assert meta["state"] == ("closed" if how == "stopped" else "open")
         fetched = out / session
         original = logs / session
         names = sorted(p.name for p in original.iterdir() if p.is_file())
@@ -69,7 +78,9 @@ def test_the_standby_takes_over_when_the_recorder_stops_and_a_follow_ends_verifi
         # The logs stay reachable after the recorder stopped.
         after = run_cli("sessions", "alpha", "--json", *shore, env=cli_env)
         assert after.returncode == 0, after.stderr
-        assert session in after.stdout
+        listed = {row["name"]: row for row in map(json.loads, after.stdout.splitlines())}
+        assert listed[session]["state"] == ("closed" if how == "stopped" else "cut")
+        assert listed[session]["complete"] is True
     finally:
         for proc in procs:
             proc.close()
