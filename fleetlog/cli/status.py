@@ -56,9 +56,8 @@ def _detail(found: VehicleStatus, conflict: bool) -> None:
     title = f"{found.vehicle}" + (f"  (recorder {found.server})" if conflict else "")
     out.print(plain(title, style="bold"))
     c = found.counters
-    state = "paused" if found.paused else ("recording" if found.session else "no session open")
     rows = [
-        ("state", state),
+        ("state", found.state),
         ("session", found.session or "-"),
         ("directory", found.directory or "-"),
         ("counters", ", ".join(f"{n} {c[n]}" for n in COUNTERS[:5] if n in c)),
@@ -83,14 +82,14 @@ def _detail(found: VehicleStatus, conflict: bool) -> None:
 def _fleet_table(found: dict[str, list[VehicleStatus]], serve_only: list[str]) -> Table:
     conflict = any(len(items) > 1 for items in found.values())
     table = Table(box=None, pad_edge=False)
-    columns = ["VEHICLE", "SESSION", "LOGGED", "LOST", "SKEWED", "GARBLED", "WRITE ERR"]
+    columns = ["VEHICLE", "STATE", "SESSION", "LOGGED", "LOST", "SKEWED", "GARBLED", "WRITE ERR"]
     columns += ["DISK FREE", "CLOCK", "LAST ERROR"]
     for column in [*columns, "RECORDER"] if conflict else columns:
         table.add_column(column, no_wrap=column != "LAST ERROR")
     for vehicle in sorted({*found, *serve_only}):
         items = found.get(vehicle)
         if not items:
-            row = [vehicle, "(no recorder: served by fleetlog serve)"]
+            row = [vehicle, "no recorder (fleetlog serve only)"]
             row += ["-"] * (len(columns) - len(row))
             table.add_row(*(plain(v) for v in row), *([""] if conflict else []))
             continue
@@ -98,7 +97,8 @@ def _fleet_table(found: dict[str, list[VehicleStatus]], serve_only: list[str]) -
             c = item.counters
             row = [
                 vehicle,
-                item.session or ("paused" if item.paused else "-"),
+                item.state,
+                item.session or "-",
                 *(str(c.get(n, "-")) for n in ("logged", "lost", "skewed", "garbled")),
                 str(c.get("write_errors", "-")),
                 _disk(item),

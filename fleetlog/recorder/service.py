@@ -27,6 +27,7 @@ from fleetlog.moos.mission import LoggerConfig
 from fleetlog.moos.patterns import chunk_includes, name_to_chunk, reduce_chunks
 from fleetlog.recorder.background import BackgroundWriter
 from fleetlog.recorder.engine import Recorder
+from fleetlog.storage.catalog import disk_space
 from fleetlog.transport.bus import (
     MissCounter,
     MoosPublisher,
@@ -301,6 +302,7 @@ class RecorderService:
 
         def answer(query: IncomingQuery) -> None:
             body = recorder.status()
+            body["disk"] = disk_space(recorder.log_root)  # what `fleetlog status` shows
             try:
                 query.reply(key, json.dumps(body).encode(), encoding="application/json")
             except TransportError:

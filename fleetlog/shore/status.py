@@ -96,6 +96,8 @@ class VehicleStatus:
         disk_total: the size of that file system, if it says.
         clock: the clock's state, as the recorder reports it (``synchronized``, ...).
         paused: whether recording is paused, if it says.
+        writing: whether a session is open and taking lines, if it says.
+        problem: why it is not writing (``disk-full``, ...), if it says.
         raw: the whole reply, for ``--json``.
     """
 
@@ -110,7 +112,16 @@ class VehicleStatus:
     disk_total: int | None = None
     clock: Mapping[str, Any] = field(default_factory=dict)
     paused: bool | None = None
+    writing: bool | None = None
+    problem: str | None = None
     raw: Mapping[str, Any] = field(default_factory=dict)
+
+    @property
+    def state(self) -> str:
+        """``recording``, ``paused``, or ``NOT WRITING`` with the reason."""
+        if self.problem or self.writing is False or (self.writing is None and not self.session):
+            return f"NOT WRITING ({self.problem or 'no session open'})"
+        return "paused" if self.paused else "recording"
 
     @property
     def losses(self) -> int:
@@ -155,6 +166,7 @@ class VehicleStatus:
         disk = disk if isinstance(disk, dict) else {}
         clock = obj.get("clock")
         paused = obj.get("paused")
+        writing = obj.get("writing")
         directory = _text(obj.get("directory"))
         session = _text(obj.get("session"))
         if session is None and directory:
@@ -171,5 +183,7 @@ class VehicleStatus:
             disk_total=_count(disk.get("total")),
             clock=clock if isinstance(clock, dict) else {},
             paused=paused if isinstance(paused, bool) else None,
+            writing=writing if isinstance(writing, bool) else None,
+            problem=_text(obj.get("problem")) or None,
             raw=obj,
         )

@@ -46,7 +46,7 @@ from fleetlog.storage.metafile import read_meta, recorder_alive
 from fleetlog.wire.query import FileInfo, FileMeta, LatestInfo, SessionInfo, check_component
 from fleetlog.wire.session_meta import CUT, META_NAME, OPEN, SessionMeta
 
-__all__ = ["ALOG_SUFFIXES", "QUIET_SECONDS", "LogCatalog"]
+__all__ = ["ALOG_SUFFIXES", "QUIET_SECONDS", "LogCatalog", "disk_space"]
 
 ALOG_SUFFIXES = (".alog", ".alog.zst", ".alog.gz")
 #: a session none of whose files changed for this long is complete (without a recorder)
@@ -520,3 +520,16 @@ class LogCatalog:
             return FileMeta(0, 0, st.st_size, st.st_mtime, False)
         digest, st = self.digests.sha256(self.root, (session, name), cancel)
         return FileMeta(0, 0, st.st_size, st.st_mtime, True, digest)
+
+
+def disk_space(path: Path) -> dict[str, int] | None:
+    """Return ``{"free", "total"}`` bytes of the file system holding ``path`` (None if unknown).
+
+    ``free`` is what an unprivileged writer may still use (``f_bavail``), as the recorder
+    would find it.
+    """
+    try:
+        st = os.statvfs(path)
+    except OSError:
+        return None
+    return {"free": st.f_bavail * st.f_frsize, "total": st.f_blocks * st.f_frsize}

@@ -41,6 +41,8 @@ def test_status_of_one_vehicle_and_of_the_fleet(
     for label in ("state", "session", "counters", "losses", "disk free", "clock", "last error"):
         assert label in one.stdout
     assert "recording" in one.stdout
+    disk = next(line for line in one.stdout.splitlines() if line.startswith("disk free"))
+    assert "iB" in disk  # the recorder says how much room is left
     assert "MOOSLog_" in one.stdout
 
     rows = run_cli("status", "--json", *mixed_fleet, env=cli_env)
@@ -50,12 +52,16 @@ def test_status_of_one_vehicle_and_of_the_fleet(
     assert row["conflict"] is False
     assert row["logged"] >= 1
     assert row["lost"] == 0
+    assert row["disk"]["free"] > 0
+    assert row["disk"]["total"] >= row["disk"]["free"]
     assert "bravo: runs no recorder" in rows.stderr
 
     table = run_cli("status", *mixed_fleet, env=cli_env)
     assert table.returncode == 0, table.stderr
     lines = table.stdout.splitlines()
-    assert lines[0].split()[:4] == ["VEHICLE", "SESSION", "LOGGED", "LOST"]
+    assert lines[0].split()[:5] == ["VEHICLE", "STATE", "SESSION", "LOGGED", "LOST"]
+    alpha = next(line for line in lines if line.startswith("alpha"))
+    assert alpha.split()[1] == "recording"
     assert any(line.startswith("bravo") and "no recorder" in line for line in lines)
 
     serve_only = run_cli("status", "bravo", *mixed_fleet, env=cli_env)
