@@ -114,7 +114,7 @@ class Standby:
         Raises:
             TransportError: the token subscription or a queryable could not be declared.
         """
-        watch = TokenWatch(self.session, service_key(self.root, self.vehicle, RECORDER_TOKEN))
+        watch = TokenWatch(self.session, [service_key(self.root, self.vehicle, RECORDER_TOKEN)])
         recorder_up = False
         started = time.monotonic()
         next_check = 0.0

@@ -4,8 +4,8 @@ A query sent right after a Zenoh session opens reaches only the peers connected 
 embedded peers and multicast scouting (fleetlog's default), ``zenoh.open`` returns once the
 first peer answers the scout, and the others connect a few milliseconds later: a plain query
 then saw 1 of 3 vehicles in 4 of 10 runs. So every shore command first *watches* the
-recorder and log-server liveliness tokens (a subscriber with history: tokens declared before
-it arrive too) and proceeds when
+recorder and log-server liveliness tokens (subscribers with history: tokens declared before
+them arrive too) and proceeds when
 
 * every vehicle it expects is seen (``--expect``, or the vehicle a command names), or
 * without expectations, once at least one vehicle is seen and neither a new token nor a new
@@ -157,7 +157,7 @@ class Discovery:
         self._started = clock()
         self._tokens: dict[str, set[str]] = {}
         self._peers: frozenset[str] = frozenset()
-        self._watch = TokenWatch(session, fleet_service_selector(root, "*"))
+        self._watch = TokenWatch(session, [fleet_service_selector(root, s) for s in services])
         self.settled: FleetView | None = None
 
     def close(self) -> None:

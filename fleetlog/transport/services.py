@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import json
 import queue
+from collections.abc import Sequence
 from typing import Any
 
 import zenoh
@@ -24,31 +25,42 @@ __all__ = [
 
 
 class TokenWatch:
-    """The liveliness tokens matching a key expression, as they come and go, with history.
+    """The liveliness tokens matching key expressions, as they come and go, with history.
 
-    The subscriber is declared with history, so tokens declared before it arrive as well;
-    :meth:`next_change` hands them over one at a time, and :meth:`neighbours` tells which
-    Zenoh peers and routers the session is connected to right now (a newly connected peer
-    may be about to deliver tokens).
+    One subscriber per expression, each declared with history, so tokens declared before it
+    arrive as well; :meth:`next_change` hands them over one at a time, and :meth:`neighbours`
+    tells which Zenoh peers and routers the session is connected to right now (a newly
+    connected peer may be about to deliver tokens). One subscriber per kind of token rather
+    than one on ``@fleetlog/*``: a router's access control allows a subscription only on a
+    key its rule includes, and each kind of token has a rule of its own.
 
     Args:
         session: an open session (not closed here).
-        selector: the tokens' key expression.
+        selectors: the tokens' key expressions.
 
     Raises:
-        TransportError: Zenoh refused the subscription.
+        TransportError: Zenoh refused a subscription.
     """
 
-    def __init__(self, session: zenoh.Session, selector: str) -> None:
+    def __init__(self, session: zenoh.Session, selectors: Sequence[str]) -> None:
         self._session = session
         self._changes: queue.SimpleQueue[tuple[str, bool]] = queue.SimpleQueue()
+        self._subs: list[Any] = []
 
         def receive(sample: zenoh.Sample) -> None:
             alive = sample.kind == zenoh.SampleKind.PUT
             self._changes.put((str(sample.key_expr), alive))
 
-        with translate_zerror(f"liveliness subscription {selector!r}"):
-            self._sub = session.liveliness().declare_subscriber(selector, receive, history=True)
+        try:
+            for selector in selectors:
+                with translate_zerror(f"liveliness subscription {selector!r}"):
+                    liveliness = session.liveliness()
+                    self._subs.append(
+                        liveliness.declare_subscriber(selector, receive, history=True)
+                    )
+        except BaseException:
+            self.close()
+            raise
 
     def next_change(self, timeout: float) -> tuple[str, bool] | None:
         """Return the next ``(key, alive)`` change, waiting up to ``timeout``; None if none."""
@@ -66,9 +78,11 @@ class TokenWatch:
             return frozenset(str(z) for z in (*info.peers_zid(), *info.routers_zid()))
 
     def close(self) -> None:
-        """Undeclare the subscriber (before the session closes: a live callback hangs it)."""
-        with contextlib.suppress(zenoh.ZError, RuntimeError):
-            self._sub.undeclare()
+        """Undeclare the subscribers (before the session closes: a live callback hangs it)."""
+        for sub in self._subs:
+            with contextlib.suppress(zenoh.ZError, RuntimeError):
+                sub.undeclare()
+        self._subs.clear()
 
 
 def live_vehicles(
