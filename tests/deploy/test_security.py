@@ -91,9 +91,13 @@ def test_record_fetch_and_grep_through_the_routers(secure: SecureFleet, tmp_path
 
 
 def test_an_operator_sends_recorder_commands(secure: SecureFleet) -> None:
-    code, _, err = secure.cli(OPS, "poke", "--vehicle", "alpha", "PLOGGER_CMD:=ops-was-here")
+    # A valid command: poke exits non-zero when the recorder refuses one (and says why).
+    code, out, err = secure.cli(
+        OPS, "poke", "--vehicle", "alpha", "PLOGGER_CMD:=LOG_REQUEST=OPS_WAS_HERE"
+    )
     assert code == 0, err
-    assert logged(secure, "alpha", "ops-was-here")
+    assert "recorder of alpha: LOG_REQUEST=OPS_WAS_HERE" in out
+    assert logged(secure, "alpha", "OPS_WAS_HERE")
 
 
 def test_a_replay_host_replays_under_its_prefix(secure: SecureFleet) -> None:
