@@ -27,7 +27,7 @@ from pathlib import Path
 from fetch_throughput import SESSION, VEHICLE, Served, fetch_round, loadavg, spread
 from read_path import write_alog
 
-from fleetlog.query.client import FleetClient
+from fleetlog.shore.client import FleetClient
 from fleetlog.transport.session import SessionOptions
 from fleetlog.wire.query import MAX_GREP_LIMIT, GrepRequest
 
