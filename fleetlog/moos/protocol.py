@@ -214,16 +214,36 @@ def encode_packet(messages: Iterable[Message]) -> bytes:
     return _PACKET.pack(size, len(body), 0) + b"".join(body)
 
 
-def _string(data: bytes | memoryview, pos: int, end: int, what: str) -> tuple[bytes, int]:
-    if pos + 4 > end:
+def _length(data: bytes | memoryview, pos: int, stop: int, what: str) -> int:
+    if pos + 4 > stop:
         msg = f"message ends inside the length of its {what}"
         raise FormatError(msg)
-    (n,) = _unpack_i32(data, pos)
-    pos += 4
-    if n < 0 or pos + n > end:
-        msg = f"message's {what} claims {n} bytes, {end - pos} are left"
+    n: int = _unpack_i32(data, pos)[0]
+    if n < 0 or pos + 4 + n > stop:
+        msg = f"message's {what} claims {n} bytes, {stop - pos - 4} are left"
         raise FormatError(msg)
-    return bytes(data[pos : pos + n]), pos + n
+    return n
+
+
+#: the text fields of recent messages: their bytes → (source, aux, community, key). A sender
+#: repeats the same few, and one lookup replaces four slices and four decodes.
+_texts: dict[bytes, tuple[str, str, str, str]] = {}
+
+
+def _decode_texts(region: bytes, nsrc: int, naux: int, ncom: int) -> tuple[str, str, str, str]:
+    a = nsrc + 4
+    c = a + naux + 4
+    k = c + ncom + 4
+    texts = (
+        region[:nsrc].decode("utf-8", "surrogateescape"),
+        region[a : a + naux].decode("utf-8", "surrogateescape"),
+        region[c : c + ncom].decode("utf-8", "surrogateescape"),
+        region[k:].decode("utf-8", "surrogateescape"),
+    )
+    if len(_texts) >= 4096:
+        _texts.clear()
+    _texts[region] = texts
+    return texts
 
 
 def decode_message(data: bytes | memoryview, pos: int = 0, end: int | None = None) -> Message:
@@ -250,30 +270,36 @@ def decode_message(data: bytes | memoryview, pos: int = 0, end: int | None = Non
     if nsrc < 0 or p + nsrc > stop:
         msg = f"message's source claims {nsrc} bytes, {stop - p} are left"
         raise FormatError(msg)
-    source = bytes(data[p : p + nsrc])
-    p += nsrc
-    aux, p = _string(data, p, stop, "aux source")
-    community, p = _string(data, p, stop, "community")
-    key, p = _string(data, p, stop, "key")
-    if p + 28 > stop:
+    q = p + nsrc
+    naux = _length(data, q, stop, "aux source")
+    q += 4 + naux
+    ncom = _length(data, q, stop, "community")
+    q += 4 + ncom
+    nkey = _length(data, q, stop, "key")
+    q += 4 + nkey
+    if q + 28 > stop:
         msg = "message ends inside its time and values"
         raise FormatError(msg)
-    when, double, double2, nval = _unpack_tail(data, p)
-    p += 28
-    if nval < 0 or p + nval != stop:
-        msg = f"message's value claims {nval} bytes, {stop - p} are left"
+    when, double, double2, nval = _unpack_tail(data, q)
+    if nval < 0 or q + 28 + nval != stop:
+        msg = f"message's value claims {nval} bytes, {stop - q - 28} are left"
         raise FormatError(msg)
+    region = bytes(data[p:q])
+    texts = _texts.get(region)
+    if texts is None:
+        texts = _decode_texts(region, nsrc, naux, ncom)
+    source, aux, community, key = texts
     return _new_message(
         Message,
         _CHR[mtype],
         _CHR[dtype],
-        key.decode("utf-8", "surrogateescape"),
+        key,
         when,
         double,
-        bytes(data[p:stop]),
-        source.decode("utf-8", "surrogateescape"),
-        aux.decode("utf-8", "surrogateescape"),
-        community.decode("utf-8", "surrogateescape"),
+        bytes(data[q + 28 : stop]),
+        source,
+        aux,
+        community,
         double2,
         ident,
     )

@@ -47,6 +47,11 @@ _BINARY_ENCODING = zenoh.Encoding(ENCODINGS[Kind.BINARY])
 class ExactPublisher(MoosPublisher):
     """Publishes MOOS messages as they came from the MOOSDB (BLOCK, reliable)."""
 
+    def __init__(self, session: zenoh.Session, root: str, vehicle: str, source: str) -> None:
+        super().__init__(session, root, vehicle, source)
+        #: (name, data type) -> its declared publisher: one lookup per message
+        self._by_name: dict[tuple[str, str], Any] = {}
+
     def put_message(self, message: Message) -> None:
         """Publish one notification: payload, encoding and attachment from its fields.
 
@@ -54,22 +59,33 @@ class ExactPublisher(MoosPublisher):
             TransportError: Zenoh refused the put.
         """
         dtype = message.data_type
-        if dtype == "D":
-            kind, payload = encode_value(message.double)
-        else:
-            kind = _KIND_OF_TYPE.get(dtype, Kind.BINARY)
-            payload = message.string
-        name = message.key
-        key = self._key(self.vehicle, name)
-        pub = self._publishers.get((key, kind))
+        pub = self._by_name.get((message.key, dtype))
         if pub is None:
-            pub = self._publisher(key, kind)
+            pub = self._declare(message.key, dtype)
+        if dtype == "D":
+            value = message.double
+            payload = repr(value).encode("ascii") if value == value else encode_value(value)[1]
+        else:
+            payload = message.string
         attachment = encode_attachment(message.time, message.source, message.aux, message.community)
         try:
             pub.put(payload, attachment=attachment)
         except zenoh.ZError as err:
-            msg = f"could not publish {name!r} on {key!r}: {err}"
+            msg = f"could not publish {message.key!r}: {err}"
             raise TransportError(msg) from err
+
+    def _declare(self, name: str, dtype: str) -> Any:
+        kind = Kind.DOUBLE if dtype == "D" else _KIND_OF_TYPE.get(dtype, Kind.BINARY)
+        pub = self._publisher(self._key(self.vehicle, name), kind)
+        if len(self._by_name) >= 4096:
+            self._by_name.clear()
+        self._by_name[(name, dtype)] = pub
+        return pub
+
+    def close(self) -> None:
+        """Undeclare the publishers (the session stays open)."""
+        self._by_name.clear()
+        super().close()
 
 
 def sample_to_message(
