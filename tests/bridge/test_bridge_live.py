@@ -359,3 +359,55 @@ def test_a_second_bridge_of_the_same_name_is_refused(
     assert "is another bridge running?" in second.stderr
     assert "Traceback" not in second.stderr
     assert first.stop() == 0
+
+
+def test_values_keep_every_bit_into_the_alog(
+    moosdbs: Callable[..., MoosDB],
+    procs: Callable[..., Proc],
+    router: Router,
+    tmp_path: Path,
+) -> None:
+    """-nan keeps its sign, a string its bytes, a message its source, aux and MOOS time."""
+    import asyncio
+
+    from fleetlog.moos.protocol import notify
+    from fleetlog.transport.moos_client import MoosClient
+
+    db = moosdbs("alpha")
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    rec = procs("record", "--vehicle", "alpha", "--no-serve", *zargs(router), cwd=logs)
+    rec.wait_for("recording vehicle")
+    bridge = start_bridge(procs, db, router)
+    when = time.time()
+    sent = [
+        notify("F_NAN", float("-nan"), when, "pSensor", "filter", "alpha"),
+        notify("F_POS", float("nan"), when + 0.01, "pSensor"),
+        notify("F_TXT", "d\u00e9j\u00e0  vu, = x", when + 0.02, "pHelmIvP", "bhv_loiter"),
+        notify("F_BIN", bytes(range(256)), when + 0.03, "iCamera"),
+    ]
+
+    async def post() -> None:
+        client = MoosClient("poster", "127.0.0.1", db.port, on_mail=lambda m: None)
+        await client.connect()
+        client.send(sent)
+        await asyncio.sleep(0.5)
+        client.close()
+
+    asyncio.run(post())
+    time.sleep(1.0)
+    assert bridge.stop() == 0
+    assert rec.stop() == 0
+    alog = alog_of(logs)
+    lines = alog.read_text().splitlines(keepends=True)
+    logstart = parse_banner([line.rstrip("\n") for line in lines[:12]]).logstart
+    entries = {e.key: e for e in iter_entries(lines)}
+    assert entries["F_NAN"].text.startswith("-nan")
+    assert entries["F_POS"].text.startswith("nan")
+    assert entries["F_TXT"].value == "d\u00e9j\u00e0  vu, = x"
+    assert entries["F_TXT"].source == "pHelmIvP"
+    assert entries["F_NAN"].source == "pSensor"
+    blog = alog.with_suffix(".blog").read_bytes()
+    assert bytes(range(256)) in blog
+    for message in sent:
+        assert abs(logstart + entries[message.key].offset - message.time) < 0.001
