@@ -108,7 +108,7 @@ def replay_ctl(
     value: Annotated[
         str | None,
         typer.Argument(
-            metavar="[VALUE]",
+            metavar="VALUE",
             help="rate: 0.1 ... 100, fast, + or -; seek: SECONDS or [H:]MM:SS from the start,"
             " +S or -S from here; step: N entries or Ns seconds of log.",
             show_default=False,

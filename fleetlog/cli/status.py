@@ -175,7 +175,7 @@ def status(
     vehicle: Annotated[
         str | None,
         typer.Argument(
-            metavar="[VEHICLE]",
+            metavar="VEHICLE",
             help="One vehicle [default: every vehicle up, as a table].",
             show_default=False,
         ),
