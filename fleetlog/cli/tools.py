@@ -171,10 +171,10 @@ def grep(
     start: From = None,
     end: To = None,
     first: Annotated[
-        bool, typer.Option("--first", help="Only each variable's first match.")
+        bool, typer.Option("--first", help="Only the first matching entry.")
     ] = False,
     final: Annotated[
-        bool, typer.Option("--final", help="Only each variable's last match.")
+        bool, typer.Option("--final", help="Only the last matching entry.")
     ] = False,
     output: Output = None,
     strict: Strict = False,

@@ -1,22 +1,16 @@
 r"""What a session listing says about an alog, read cheaply: head, tail and variable names.
 
+Every part reads through the columnar reader's parser (:mod:`fleetlog.storage.columnar`):
+
 * :func:`read_head` reads the banner and the first entries (at most 256 KiB of text): LOGSTART,
   the time column's decimals, MarkDataType and the community from the MOOSDB's ``DB_TIME``
   source (``MOOSDB_<community>``, as alogsplit finds the vehicle name, MOOS_FORMAT.md §7.2).
 * :func:`tail_offset` finds the last entry's time in a plain alog by reading backwards from
-  the end in 64 KiB steps, so a session's duration costs one small read, not the whole file.
+  the end in growing steps, so a session's duration costs one small read, not the whole file.
 * :class:`VariableScan` counts the distinct variables. There is no index beside pLogger's
-  files, so it scans: bytes in 1 MiB blocks, one compiled regular expression that captures
-  only the padded variable column, deduplicated by ``set()`` in C, no line objects (about
-  120 MB/s here, against 25 MB/s for a match object per line). A plain file that grew is
-  scanned only from where the last scan stopped (same inode), so a live session's count stays
+  files, so it scans, in 8 MiB blocks of typed columns. A plain file that grew is scanned
+  only from where the last scan stopped (same inode), so a live session's count stays
   cheap; a compressed file is read whole.
-
-An entry line is recognised by pLogger's column rule (MOOS_FORMAT.md §2.2): a time, padded
-with spaces to 15 characters (or longer with one space), a variable padded to 20, then the
-source. A continuation line of a multi-line value only counts when it has that exact shape,
-as :class:`fleetlog.moos.alog.EntryParser` reads it. The scan ignores entries whose time has
-16 characters or more (10^9 s after LOGSTART), which pLogger never writes.
 """
 
 from __future__ import annotations
@@ -29,7 +23,8 @@ from pathlib import Path
 
 from fleetlog.errors import FormatError, StorageError
 from fleetlog.moos.alog import BANNER_RULE, Banner, parse_banner
-from fleetlog.storage.readers import open_text
+from fleetlog.storage.columnar import parse_lines, read_tail
+from fleetlog.storage.decompress import open_text
 
 __all__ = ["HeadInfo", "VariableScan", "is_compressed", "read_head", "tail_offset"]
 
@@ -37,13 +32,6 @@ _HEAD_BYTES = 256 << 10
 _TAIL_STEP = 64 << 10
 _TAIL_MAX = 4 << 20
 _SCAN_BLOCK = 1 << 20
-#: time (padded to 15) + one space, variable (padded to 20) + one space, source + one space
-_ENTRY = re.compile(rb"^(-?[0-9][0-9.]*)( +)([^ \n]+)( +)[^ \n]+ ", re.MULTILINE)
-#: the same rule in one pattern, capturing only the padded variable column (fast to dedupe)
-_KEY_COLUMN = re.compile(
-    rb"\n[-0-9][0-9.]{0,14} +(?<=\n.{16})"
-    rb"([^ \n]{21,}(?= [^ \n])|[^ \n]{1,20} +(?<=\n.{37})(?=[^ \n]))"
-)
 _STATUS_COMMUNITY = re.compile(r"[ ,]Community=([^,]*)")
 _COMMUNITY = re.compile(r"MOOSDB_(\S+)")
 
@@ -51,11 +39,6 @@ _COMMUNITY = re.compile(r"MOOSDB_(\S+)")
 def is_compressed(path: Path) -> bool:
     """Return True for a ``.gz`` or ``.zst`` file."""
     return path.suffix.lower() in (".gz", ".zst")
-
-
-def _shaped(match: re.Match[bytes]) -> bool:
-    time_len, pad1, key_len, pad2 = (len(g) for g in match.group(1, 2, 3, 4))
-    return time_len + pad1 == max(16, time_len + 1) and key_len + pad2 == max(21, key_len + 1)
 
 
 @dataclass(frozen=True, slots=True)
@@ -101,33 +84,28 @@ def read_head(path: Path) -> HeadInfo:
     decimals: int | None = None
     community: str | None = None
     status: str | None = None
-    for line in lines[len(banner_lines) :]:
-        match = _ENTRY.match(line.encode("utf-8", "surrogateescape") + b"\n")
-        if match is None or not _shaped(match):
-            continue
-        time_text = match.group(1).decode()
-        if decimals is None:
-            decimals = len(time_text.partition(".")[2])
-        fields = line.split()
-        if fields[1] == "DB_TIME":
-            found = _COMMUNITY.fullmatch(fields[2])
+    frame = parse_lines(head.encode("utf-8", "surrogateescape"), final=True)[0]
+    if frame.height:
+        first = frame.row(0, named=True)
+        decimals = _decimals(lines, first["line"])
+    for key, source, text in frame.select("var", "source", "text").iter_rows():
+        if key == "DB_TIME":
+            found = _COMMUNITY.fullmatch(source)
             if found:
                 community = found.group(1)
                 break
-        elif status is None and fields[1].endswith("_STATUS"):
+        elif status is None and key.endswith("_STATUS"):
             # A fleetlog recorder's status names the vehicle when no MOOSDB posted DB_TIME.
-            named = _STATUS_COMMUNITY.search(line.rstrip(" "))
+            named = _STATUS_COMMUNITY.search(text.rstrip(" "))
             if named and named.group(1):
                 status = named.group(1)
     return HeadInfo(banner, tuple(banner_lines), decimals, community or status)
 
 
-def _last_entry_time(data: bytes) -> float | None:
-    found = None
-    for match in _ENTRY.finditer(data):
-        if _shaped(match):
-            found = match
-    return None if found is None else float(found.group(1))
+def _decimals(lines: list[str], line: int) -> int:
+    """Return the decimals of the time column of 1-based ``line``."""
+    time_text = lines[line - 1].split(" ", 1)[0]
+    return len(time_text.partition(".")[2])
 
 
 def tail_offset(path: Path) -> float | None:
@@ -139,29 +117,19 @@ def tail_offset(path: Path) -> float | None:
     Raises:
         StorageError: the file cannot be read.
     """
-    try:
-        with path.open("rb") as file:
-            end = file.seek(0, os.SEEK_END)
-            step = _TAIL_STEP
-            while True:
-                start = max(0, end - step)
-                file.seek(start)
-                data = file.read(end - start)
-                last = data.rfind(b"\n")
-                if start > 0:
-                    first = data.find(b"\n")  # the first line may be cut: skip it
-                    data = data[first + 1 : last + 1] if 0 <= first < last else b""
-                else:
-                    data = data[: last + 1]
-                found = _last_entry_time(data)
-                if found is not None:
-                    return found
-                if start == 0 or step >= _TAIL_MAX:
-                    return None
-                step *= 4
-    except OSError as err:
-        msg = f"cannot read {path}: {err.strerror or err}"
-        raise StorageError(msg) from err
+    step = _TAIL_STEP
+    while True:
+        offsets = read_tail(path, step)["offset"]
+        if offsets.len():
+            return float(offsets[-1])
+        try:
+            size = path.stat().st_size
+        except OSError as err:
+            msg = f"cannot read {path}: {err.strerror or err}"
+            raise StorageError(msg) from err
+        if step >= size or step >= _TAIL_MAX:
+            return None
+        step *= 4
 
 
 @dataclass
@@ -179,7 +147,7 @@ class VariableScan:
     path: Path
     inode: int = -1
     position: int = 0
-    variables: set[bytes] = field(default_factory=set)
+    variables: set[str] = field(default_factory=set)
     last_offset: float | None = None
 
     def update(self) -> None:
@@ -212,30 +180,26 @@ class VariableScan:
             raise StorageError(msg) from err
 
     def _scan(self, read: Callable[[int], bytes]) -> None:
-        # ``data`` always starts with the newline that ended the line before it (a virtual
-        # one for the file's first line), because the pattern anchors on it; ``base`` is the
-        # file offset of data[0].
-        carry = b"\n"
-        base = self.position - 1
+        # ``carry`` holds the unfinished last entry (its value may go on in the next block);
+        # ``position`` is where it starts, so a scan that resumes reads it again.
+        carry = b""
         found = self.variables
-        tail = b""
         while block := read(_SCAN_BLOCK):
             data = carry + block
-            last = data.rfind(b"\n")
-            if last <= 0:
-                carry = data
-                continue
-            found.update(_KEY_COLUMN.findall(data, 0, last + 1))
-            tail = data[max(0, last + 1 - _TAIL_STEP) : last + 1]
-            carry = data[last:]
-            base += last
-            self.position = base + 1
-        if tail:
-            offset = _last_entry_time(tail)
-            if offset is not None:
-                self.last_offset = offset
+            frame, used = parse_lines(data)
+            found.update(frame["var"].unique().to_list())
+            if frame.height:
+                self.last_offset = float(frame["offset"][-1])
+            carry = data[used:]
+            self.position += used
+        if carry:
+            # what is left at the end: read it now, but resume from its start next time
+            frame = parse_lines(carry, final=True)[0]
+            found.update(frame["var"].unique().to_list())
+            if frame.height:
+                self.last_offset = float(frame["offset"][-1])
 
     @property
     def count(self) -> int:
         """How many distinct variables were seen."""
-        return len({name.rstrip(b" ") for name in self.variables})
+        return len(self.variables)

@@ -87,6 +87,7 @@ __all__ = [
     "Errors",
     "find_alog",
     "limit_threads",
+    "parse_lines",
     "read_tail",
 ]
 
@@ -1128,6 +1129,46 @@ def read_tail(path: str | os.PathLike[str], size: int) -> pl.DataFrame:
         on_drop=lambda: None,
     )
     return parsed.frame.select(columns)
+
+
+def parse_lines(data: bytes, *, final: bool = False) -> tuple[pl.DataFrame, int]:
+    """Parse log text that starts at a line's start; return entries and the bytes they take.
+
+    For scans that resume where they stopped (a growing file): without ``final``, the
+    last entry and any cut line are left for the next call (its value may go on), and the
+    byte count says where that call starts; with ``final``, the last whole entry is read
+    too. Stray lines are ignored. Columns: ``line`` (from 1 at ``data``'s start),
+    ``offset``, ``var``, ``source``, ``type``, ``double``, ``text``.
+    """
+    pl = _polars()
+    want = frozenset(("line", "offset", "var", "source", "type", "double", "text"))
+    columns = [name for name in SCHEMA if name in want]
+    end = data.rfind(b"\n")
+    if end < 0:
+        return _typed(pl, _no_heads(pl), pl.lit(False), 1, None, want).select(columns), 0
+    block = data[:end]
+    try:
+        text = block.decode("utf-8")
+        raw = None
+    except UnicodeDecodeError:
+        text = block.decode("utf-8", "fleetlog.byte-per-char")
+        raw = block
+    tail = data[end + 1 :]
+    parsed = _parse_block(
+        pl,
+        text,
+        raw,
+        _Pass(),
+        None,
+        want,
+        final=final,
+        complete=not tail or tail.startswith(b"%") or _starts_entry(tail),
+        mark_at_end=False,
+        on_drop=lambda: None,
+    )
+    kept = block.count(b"\n") + 1 - parsed.consumed
+    used = len(data) if final else _line_start(data, end, kept)
+    return parsed.frame.select(columns), min(used, len(data))
 
 
 def _no_heads(lib: ModuleType) -> pl.DataFrame:

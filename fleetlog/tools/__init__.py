@@ -3,7 +3,7 @@
 Each reads through the one columnar read path (:mod:`fleetlog.storage.columnar`), streams
 (memory does not grow with the log), takes plain, ``.gz`` and ``.zst`` alogs or session
 directories, and writes alogs that the MOOS-IvP tools read (a banner, then entry lines
-byte for byte as they were in the input). ``docs/tools.md`` says where they differ from
+byte for byte as they were in the input). ``docs/reading.md`` says where they differ from
 alogscan, aloggrep, alogclip and alogsort.
 """
 

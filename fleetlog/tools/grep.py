@@ -3,7 +3,8 @@
 aloggrep and alogclip semantics (MOOS_FORMAT.md §7.2): the banner, then every entry whose
 variable and source match (MOOS globs) and whose time lies in the window, each written back
 byte for byte, continuation lines included. ``first``/``final`` keep only the first or the
-last match of each variable. ``docs/tools.md`` lists where this differs from the C++ tools.
+last matching entry, as aloggrep's ``--first``/``--final`` do. ``docs/reading.md`` lists
+where this differs from the C++ tools.
 """
 
 from __future__ import annotations
@@ -51,8 +52,8 @@ def grep_log(
         log: the input.
         out: a binary stream.
         selection: variables, sources and time window.
-        first: keep only each variable's first match.
-        final: keep only each variable's last match (written at the end, in file order).
+        first: keep only the first matching entry.
+        final: keep only the last matching entry.
         banner: write the input's banner first.
         errors: the reader's policy for stray lines and corrupt data.
 
@@ -67,28 +68,25 @@ def grep_log(
         msg = "--first and --final exclude each other"
         raise UsageError(msg)
     matched = 0
-    seen: set[str] = set()
-    last: dict[str, tuple[int, bytes]] = {}
+    last: bytes | None = None
     with log.reader(errors) as reader:
         if banner:
             out.write(reader.banner_bytes)
         where = None if selection.everything else selection
-        for batch in reader.batches(("line", "var", "raw"), where=where):
-            if first:
-                batch = batch.filter(batch["var"].is_first_distinct())
-                batch = batch.filter(~batch["var"].is_in(list(seen)))
-                seen.update(batch["var"].to_list())
-            if final:
-                for line, var, raw in batch.iter_rows():
-                    last[var] = (line, raw)
+        for batch in reader.batches(("line", "raw"), where=where):
+            raws = batch["raw"]
+            if not raws.len():
                 continue
-            raws = batch["raw"].to_list()
-            if raws:
-                out.write(b"\n".join(raws) + b"\n")
-            matched += len(raws)
-        if final:
-            ordered = sorted(last.values())
-            if ordered:
-                out.write(b"\n".join(raw for _, raw in ordered) + b"\n")
-            matched = len(ordered)
+            if first:
+                out.write(raws[0] + b"\n")
+                matched = 1
+                break
+            if final:
+                last = raws[-1]
+                continue
+            out.write(b"\n".join(raws.to_list()) + b"\n")
+            matched += raws.len()
+        if final and last is not None:
+            out.write(last + b"\n")
+            matched = 1
         return GrepResult(matched, reader.scanned, reader.skipped, reader.truncated)

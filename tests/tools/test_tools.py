@@ -69,11 +69,11 @@ def test_clip_first_and_final(tmp_path: Path) -> None:
     assert all(1.2 <= e.offset <= 1.9 for e in got)
     assert len(got) == sum(1 for e in oracle(log.path) if 1.2 <= e.offset <= 1.9)
     first, final = io.BytesIO(), io.BytesIO()
-    grep_log(log, first, Selection(variables=("NAV_X",)), first=True)
-    grep_log(log, final, Selection(variables=("NAV_X",)), final=True)
-    nav_x = [e for e in oracle(log.path) if e.key == "NAV_X"]
-    assert [e.text for e in reread(first.getvalue(), tmp_path, "f.alog")[1]] == [nav_x[0].text]
-    assert [e.text for e in reread(final.getvalue(), tmp_path, "l.alog")[1]] == [nav_x[-1].text]
+    grep_log(log, first, Selection(keys=("NAV_*",)), first=True)
+    grep_log(log, final, Selection(keys=("NAV_*",)), final=True)
+    nav = [e for e in oracle(log.path) if e.key.startswith("NAV_")]
+    assert strip_lineno(reread(first.getvalue(), tmp_path, "f.alog")[1]) == strip_lineno(nav[:1])
+    assert strip_lineno(reread(final.getvalue(), tmp_path, "l.alog")[1]) == strip_lineno(nav[-1:])
     with pytest.raises(UsageError, match="exclude"):
         grep_log(log, io.BytesIO(), Selection(), first=True, final=True)
 
