@@ -170,12 +170,8 @@ def grep(
     sources: Sources = None,
     start: From = None,
     end: To = None,
-    first: Annotated[
-        bool, typer.Option("--first", help="Only the first matching entry.")
-    ] = False,
-    final: Annotated[
-        bool, typer.Option("--final", help="Only the last matching entry.")
-    ] = False,
+    first: Annotated[bool, typer.Option("--first", help="Only the first matching entry.")] = False,
+    final: Annotated[bool, typer.Option("--final", help="Only the last matching entry.")] = False,
     output: Output = None,
     strict: Strict = False,
 ) -> None:
