@@ -834,22 +834,28 @@ def _parse_block(
         .collect()
     )
     std_mask = parsed["std"]
-    heads = parsed.filter(std_mask).drop("std")
-    heads = heads.with_columns(
+    parsed = parsed.with_columns(
         kpos=pl.lit(16, pl.Int32), spos=pl.lit(37, pl.Int32), vpos=pl.lit(53, pl.Int32)
     )
     rest = lines.filter(~std_mask)
     general_idx = None
+    entry_mask = std_mask
     if rest.height:
         candidates = rest.filter(line.str.contains(r"^-?[0-9]"))
         if candidates.height:
             general = _general(pl, candidates)
             if general.height:
+                # the overflowing lines' fields replace the standard layout's, in place
                 general_idx = general["idx"]
-                heads = heads.merge_sorted(general, key="idx") if heads.height else general
+                parsed = parsed.with_columns(
+                    parsed[name].scatter(general_idx, general[name])
+                    for name in ("offset", "var", "source", "v", "kpos", "spos", "vpos")
+                )
+                entry_mask = std_mask.clone().scatter(general_idx, True)
         comments = rest.filter(line.str.starts_with("%"))
     else:
         comments = rest
+    heads = parsed.filter(entry_mask).drop("std")
     comment_idx = comments["idx"]
     n_heads = heads.height + comments.height
 
@@ -861,7 +867,7 @@ def _parse_block(
         is_head = std_mask.clone()
         is_head = is_head.scatter(comment_idx, True) if comments.height else is_head
         is_head = is_head.scatter(general_idx, True) if general_idx is not None else is_head
-        is_entry = std_mask if general_idx is None else std_mask.clone().scatter(general_idx, True)
+        is_entry = entry_mask
         tagged = lines.with_columns(
             gid=is_head.cast(pl.Int32).cum_sum(), head=is_head, entry=is_entry
         )
@@ -887,7 +893,7 @@ def _parse_block(
     # end of the file): the line parser classified an entry then.
     end_mark = state.mark
     mark_lines = comments.filter(line == DATATYPE_MARKING)["idx"] if comments.height else None
-    mark: Any = pl.lit(state.mark)
+    mark: Any = state.mark
     if not state.mark and mark_lines is not None and mark_lines.len():
         end_mark = True
         first = int(mark_lines[0])
@@ -923,7 +929,7 @@ def _parse_block(
             heads = heads.slice(0, heads.height - 1)
             dropped = True
         elif mark_at_end and not end_mark:
-            mark = pl.when(col("idx") == last_head).then(True).otherwise(mark)
+            mark = pl.when(col("idx") == last_head).then(True).otherwise(pl.lit(mark))
     if dropped:
         on_drop()
     state.entries += heads.height
@@ -937,7 +943,7 @@ def _parse_block(
             )
         )
         heads = heads.filter(keep)
-    frame = _typed(pl, heads, mark, state.lineno, logstart, want)
+    frame = _typed(pl, heads, mark, state.lineno, logstart, want, cont is not None)
     if block is not None:
         frame = _exact_raw(pl, frame, block, state.lineno)
     return _Parsed(frame, consumed, end_mark, orphans, block is None)
@@ -950,33 +956,61 @@ def _typed(
     first_line: int,
     logstart: float | None,
     want: frozenset[str],
+    continued: bool = True,
 ) -> pl.DataFrame:
-    """Turn entry heads (fields of the first line, continuation text) into typed columns."""
+    """Turn entry heads (fields of the first line, continuation text) into typed columns.
+
+    ``mark`` is a bool when the whole block has one DATATYPE MARKING state (nearly always:
+    the expressions are then simpler), else an expression; ``continued`` says whether any
+    entry has continuation lines.
+    """
     col = pl.col
     text0 = col("text0")
-    frame = heads.lazy().with_columns(
-        value=pl.when(col("c").is_not_null()).then(col("v") + "\n" + col("c")).otherwise(col("v")),
-        mk=mark,
+    value = (
+        pl.when(col("c").is_not_null()).then(col("v") + "\n" + col("c")).otherwise(col("v"))
+        if continued
+        else col("v")
     )
+    frame = heads.lazy().with_columns(value=value)
     frame = frame.with_columns(
         term=col("value").str.ends_with(" "), text0=col("value").str.strip_suffix(" ")
     )
-    frame = frame.with_columns(
-        binary=~col("term") & text0.str.contains(_BINARY),
-        dmark=col("mk") & text0.str.starts_with("D:"),
-        smark=col("mk") & text0.str.starts_with("S:"),
-        body=text0.str.strip_chars_end(" "),
-    )
-    body = pl.when(col("dmark")).then(text0.str.slice(2).str.strip_chars_end(" ")).otherwise("body")
-    frame = frame.with_columns(body=body).with_columns(
-        double=~col("binary")
-        & col("body").str.contains(_DOUBLE)
-        & pl.when(col("mk"))
-        .then(col("dmark"))
-        .otherwise(
-            text0.str.len_bytes() == pl.max_horizontal(pl.lit(12), col("body").str.len_bytes())
+    if mark is False:
+        frame = frame.with_columns(
+            binary=~col("term") & text0.str.contains(_BINARY),
+            dmark=pl.lit(False),
+            smark=pl.lit(False),
+            body=text0.str.strip_chars_end(" "),
+        ).with_columns(
+            double=~col("binary")
+            & col("body").str.contains(_DOUBLE)
+            & (
+                text0.str.len_bytes()
+                == pl.max_horizontal(pl.lit(12, pl.UInt32), col("body").str.len_bytes())
+            )
         )
-    )
+    else:
+        frame = frame.with_columns(
+            mk=pl.lit(True) if mark is True else mark,
+        ).with_columns(
+            binary=~col("term") & text0.str.contains(_BINARY),
+            dmark=col("mk") & text0.str.starts_with("D:"),
+            smark=col("mk") & text0.str.starts_with("S:"),
+            body=text0.str.strip_chars_end(" "),
+        )
+        body = (
+            pl.when(col("dmark")).then(text0.str.slice(2).str.strip_chars_end(" ")).otherwise("body")
+        )
+        frame = frame.with_columns(body=body).with_columns(
+            double=~col("binary")
+            & col("body").str.contains(_DOUBLE)
+            & pl.when(col("mk"))
+            .then(col("dmark"))
+            .otherwise(
+                text0.str.len_bytes()
+                == pl.max_horizontal(pl.lit(12, pl.UInt32), col("body").str.len_bytes())
+            )
+        )
     exprs: dict[str, Any] = {
         "line": (col("idx") + first_line).cast(pl.Int64),
         "offset": col("offset"),
