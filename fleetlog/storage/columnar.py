@@ -54,7 +54,9 @@ import codecs
 import importlib
 import os
 import sys
+from collections import deque
 from collections.abc import Callable, Iterable, Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 from types import ModuleType, TracebackType
@@ -93,6 +95,10 @@ __all__ = [
 
 #: Decompressed bytes parsed at a time by default (about 100k lines of a typical log).
 BLOCK_SIZE = 8 << 20
+#: Blocks parsed at once (never more than polars' thread pool: one in a recorder).
+_WORKERS = 2
+#: Lines looked at, from the end of a block, for an entry to cut the block before.
+_CUT_LOOKBACK = 64
 #: The error policy: ``"raise"`` (tests, tools) or ``"skip"`` (field logs, remote grep).
 Errors = Literal["raise", "skip"]
 
@@ -218,6 +224,7 @@ class _Parsed:
     mark: bool  # the DATATYPE MARKING state after the consumed lines
     orphans: list[int]  # line numbers of stray lines
     exact: bool  # the block was valid UTF-8
+    scanned: int = 0  # entries read (before ``where``)
 
 
 class AlogReader:
@@ -484,12 +491,17 @@ class AlogReader:
     ) -> Iterator[tuple[pl.DataFrame, bool]]:
         pl = _polars()
         state = _Pass(where=where)
-        carry = head
-        size = self.block_size
+        workers = min(_WORKERS, int(pl.thread_pool_size()))
+        pool = ThreadPoolExecutor(workers, "fleetlog-read") if workers > 1 else None
+        pending: deque[Future[_Parsed]] = deque()
         try:
+            carry = head
+            size = self.block_size
             while True:
                 data, corrupt = self._read(stream, size)
                 if not data:
+                    while pending:
+                        yield from self._account(pending.popleft().result(), state)
                     yield from self._finish(pl, state, carry, want, cut=corrupt or stream.truncated)
                     return
                 buf = carry + data if carry else data
@@ -498,8 +510,25 @@ class AlogReader:
                     carry = buf
                     size *= 2  # one line longer than a block
                     continue
+                cut = _entry_start(pl, buf, end) if pool is not None else None
+                if cut is not None:
+                    # The block ends where an entry starts, so it is whole: parse it while
+                    # the next one is read (polars releases the GIL), in order.
+                    block, carry = buf[: cut - 1], buf[cut:]
+                    job = _Pass(lineno=state.lineno, mark=state.mark, where=where)
+                    state.lineno += block.count(b"\n") + 1
+                    state.mark = state.mark or (b"\n" + _MARKING + b"\n") in (b"\n" + block + b"\n")
+                    assert pool is not None
+                    pending.append(pool.submit(self._parse_job, pl, block, job, want))
+                    while len(pending) > workers or (pending and pending[0].done()):
+                        yield from self._account(pending.popleft().result(), state)
+                    size = self.block_size
+                    continue
+                # No entry starts near the end of the block: find the unfinished entry by
+                # parsing it, after the blocks before it.
+                while pending:
+                    yield from self._account(pending.popleft().result(), state)
                 parsed = self._parse(pl, buf[:end], state, want, final=False)
-                # carry the unfinished entry (its lines may go on in the next block)
                 kept = buf.count(b"\n", 0, end) + 1 - parsed.consumed
                 carry = buf[_line_start(buf, end, kept) :]
                 yield from self._account(parsed, state)
@@ -507,8 +536,15 @@ class AlogReader:
                 state.mark = parsed.mark
                 size = self.block_size if parsed.consumed else size * 2
         finally:
+            for future in pending:
+                future.cancel()
+            if pool is not None:
+                pool.shutdown(wait=True, cancel_futures=True)
             stream.close()
             self._open.discard(stream)
+
+    def _parse_job(self, pl: ModuleType, block: bytes, job: _Pass, want: frozenset[str]) -> _Parsed:
+        return self._parse(pl, block, job, want, final=False, at_head=True)
 
     def _finish(
         self, pl: ModuleType, state: _Pass, carry: bytes, want: frozenset[str], *, cut: bool
@@ -566,6 +602,7 @@ class AlogReader:
                 if before.height:
                     yield before, parsed.exact
                 raise _stray_error(self.path, count, line)
+        state.entries += parsed.scanned
         self.scanned = state.entries
         if frame.height:
             yield frame, parsed.exact
@@ -580,6 +617,7 @@ class AlogReader:
         final: bool,
         complete: bool = True,
         mark_at_end: bool = False,
+        at_head: bool = False,
     ) -> _Parsed:
         """Parse the whole lines of ``block`` (no trailing newline) into entries."""
         exact = True
@@ -599,6 +637,7 @@ class AlogReader:
             complete=complete,
             mark_at_end=mark_at_end,
             on_drop=self._dropped,
+            at_head=at_head,
         )
 
     def _dropped(self) -> None:
@@ -720,6 +759,35 @@ def _starts_entry(line: bytes) -> bool:
     return c == 0x2D and len(line) > 1 and 0x30 <= line[1] <= 0x39
 
 
+def _entry_start(pl: ModuleType, buf: bytes, end: int) -> int | None:
+    """Return where the last entry line of ``buf[:end]`` starts (not at 0), or None.
+
+    Looks at the last :data:`_CUT_LOOKBACK` whole lines only, with the reader's own rule
+    for an entry line (so a block cut there ends with whole entries).
+    """
+    starts: list[int] = []
+    pos = end
+    while len(starts) < _CUT_LOOKBACK and pos > 0:
+        start = buf.rfind(b"\n", 0, pos) + 1
+        if start == 0:
+            break
+        starts.append(start)
+        pos = start - 1
+    if not starts:
+        return None
+    ends = [end, *(start - 1 for start in starts[:-1])]
+    texts = [
+        buf[a:b].decode("utf-8", "fleetlog.byte-per-char")
+        for a, b in zip(starts, ends, strict=True)
+    ]
+    lines = pl.DataFrame({"l": texts}).with_row_index("idx")
+    entries = lines.filter(_std_mask(pl))["idx"].to_list()
+    others = lines.filter(~_std_mask(pl) & pl.col("l").str.contains(r"^-?[0-9]"))
+    if others.height:
+        entries += _general(pl, others)["idx"].to_list()
+    return starts[min(entries)] if entries else None
+
+
 def _line_start(buf: bytes, end: int, lines: int) -> int:
     """Return where the last ``lines`` lines of ``buf[:end]`` start (``end`` if none)."""
     if lines <= 0:
@@ -740,6 +808,18 @@ def _all_spaces(pl: ModuleType, expr: Any, width: Any) -> Any:
     """An expression: ``expr`` holds at least ``width`` characters, the first ``width`` spaces."""
     return (expr.str.len_chars() >= width) & (
         expr.str.slice(0, width).str.strip_chars_start(" ").str.len_bytes() == 0
+    )
+
+
+def _std_mask(pl: ModuleType) -> Any:
+    """An expression: the line ``l`` is an entry with no field wider than its column."""
+    line = pl.col("l")
+    source_field = line.str.slice(37, 16)
+    return (
+        source_field.str.len_chars().eq(16)
+        & line.str.slice(0, 16).str.contains(_STD_TIME)
+        & line.str.slice(16, 21).str.contains(_STD_KEY)
+        & source_field.str.contains(_STD_SOURCE)
     )
 
 
@@ -808,8 +888,14 @@ def _parse_block(
     complete: bool,
     mark_at_end: bool,
     on_drop: Any,
+    at_head: bool = False,
 ) -> _Parsed:
-    """Parse the lines of ``text``; ``block`` is its bytes when they were not all UTF-8."""
+    """Parse the lines of ``text``; ``block`` is its bytes when they were not all UTF-8.
+
+    ``final``: the file ends here (the cut-tail rules apply to the last entry). ``at_head``:
+    the next line, not in ``text``, starts an entry, so every entry here is finished.
+    Otherwise the last entry may go on in the next block: it is left out (``consumed``).
+    """
     col = pl.col
     line = col("l")
     lines = pl.DataFrame({"l": [text]}).select(line.str.split("\n").explode()).with_row_index("idx")
@@ -822,10 +908,7 @@ def _parse_block(
         .select(
             "idx",
             "l",
-            std=source_field.str.len_chars().eq(16)
-            & line.str.slice(0, 16).str.contains(_STD_TIME)
-            & line.str.slice(16, 21).str.contains(_STD_KEY)
-            & source_field.str.contains(_STD_SOURCE),
+            std=_std_mask(pl),
             offset=line.str.slice(0, 16).str.strip_chars_end(" ").cast(pl.Float64, strict=False),
             var=line.str.slice(16, 21).str.strip_chars_end(" "),
             source=source_field.str.strip_chars_end(" "),
@@ -914,10 +997,10 @@ def _parse_block(
     )
     last_is_entry = heads.height > 0 and int(heads["idx"][-1]) == last_head
     dropped = False
-    if last_is_entry and not final:
+    if last_is_entry and not final and not at_head:
         consumed = last_head
         heads = heads.slice(0, heads.height - 1)
-    elif last_is_entry:
+    elif last_is_entry and final:
         # the last entry: whole only if the file was, and if it ends with its terminator
         value = heads["v"][-1]
         more = heads["c"][-1]
@@ -932,7 +1015,7 @@ def _parse_block(
             mark = pl.when(col("idx") == last_head).then(True).otherwise(pl.lit(mark))
     if dropped:
         on_drop()
-    state.entries += heads.height
+    scanned = heads.height
     if state.where is not None and heads.height:
         keep = state.where(
             heads.select(
@@ -946,7 +1029,7 @@ def _parse_block(
     frame = _typed(pl, heads, mark, state.lineno, logstart, want, cont is not None)
     if block is not None:
         frame = _exact_raw(pl, frame, block, state.lineno)
-    return _Parsed(frame, consumed, end_mark, orphans, block is None)
+    return _Parsed(frame, consumed, end_mark, orphans, block is None, scanned)
 
 
 def _typed(
@@ -999,7 +1082,9 @@ def _typed(
             body=text0.str.strip_chars_end(" "),
         )
         body = (
-            pl.when(col("dmark")).then(text0.str.slice(2).str.strip_chars_end(" ")).otherwise("body")
+            pl.when(col("dmark"))
+            .then(text0.str.slice(2).str.strip_chars_end(" "))
+            .otherwise("body")
         )
         frame = frame.with_columns(body=body).with_columns(
             double=~col("binary")

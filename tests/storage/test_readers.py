@@ -402,9 +402,10 @@ def test_memory_does_not_grow_with_file_size(
     count, peak = entries_peak_memory(big)
     assert (count_small, count) == (lines, 4 * lines)
     # Correctness bounds, not timing ones: four times the file needs no more memory, and a
-    # few blocks' worth is all it needs (a reader that held the file would need more).
+    # few blocks' worth (two parsed at once, one read ahead) is all it needs (a reader that
+    # held the file would need more).
     assert peak < 1.5 * peak_small, (peak, peak_small)
-    assert peak < min(8 * BLOCK, text_size / 2), (peak, text_size)
+    assert peak < min(16 * BLOCK, text_size / 2), (peak, text_size)
 
 
 # --------------------------------------------------------------------------------------------
