@@ -46,6 +46,9 @@ STATUS_COMMUNITY = re.compile(r"(?:^|,)Community=([^,]*)")
 VEHICLE_SCAN_ENTRIES = 5000
 #: Bytes read from the end of a plain alog to find its last entry time.
 TAIL_BYTES = 64 * 1024
+#: The reader's block for replay: small enough that parsing one (on a worker thread, ahead
+#: of the player) is quick, large enough to keep the reader fast.
+REPLAY_BLOCK = 1 << 20
 _ALOG_SUFFIXES = (".alog.zst", ".alog.gz", ".alog")
 _REMOTE_RE = re.compile(r"(?P<vehicle>[^/:]+):(?P<session>[^/]+)")
 
@@ -209,6 +212,7 @@ def open_input(
     errors: Errors = "raise",
     how: str = "--as",
     name: str | None = None,
+    block_size: int = REPLAY_BLOCK,
 ) -> ReplayInput:
     """Open one input: check its banner, find its vehicle and, if cheap, its end time.
 
@@ -218,6 +222,7 @@ def open_input(
         errors: the reader's error policy for bad lines (``"raise"`` or ``"skip"``).
         how: how ``vehicle`` was chosen, for the summary.
         name: the input as the user named it (the spec by default).
+        block_size: the reader's block (see :class:`~fleetlog.storage.columnar.AlogReader`).
 
     Raises:
         ReplayError: the input does not exist, or its vehicle cannot be found.
@@ -226,7 +231,7 @@ def open_input(
     """
     path = os.fspath(spec)
     name = path if name is None else name
-    reader = AlogReader(_alog_of(path), errors=errors)
+    reader = AlogReader(_alog_of(path), errors=errors, block_size=block_size)
     try:
         logstart, found = _identify(reader, name, vehicle, how)
         return ReplayInput(name, reader, found[0], found[1], logstart, _tail_end(reader))
@@ -259,6 +264,7 @@ def open_inputs(
     *,
     errors: Errors = "raise",
     fetch: Callable[[RemoteSpec], Path] | None = None,
+    block_size: int = REPLAY_BLOCK,
 ) -> list[ReplayInput]:
     """Open several inputs; ``vehicles`` is empty, one name for all, or one per input.
 
@@ -268,6 +274,7 @@ def open_inputs(
         errors: the readers' error policy.
         fetch: brings a remote session (``V:latest``, ``V:SESSION``) into a local directory;
             without it a remote input is refused. Its vehicle is ``V`` unless ``--as``.
+        block_size: the readers' block.
 
     Raises:
         ReplayError: no inputs, a wrong number of vehicle names, or as :func:`open_input`.
@@ -300,10 +307,17 @@ def open_inputs(
                 how = "--as" if vehicle is not None else "remote"
                 chosen = remote.vehicle if vehicle is None else vehicle
                 opened.append(
-                    open_input(local, chosen, errors=errors, how=how, name=os.fspath(spec))
+                    open_input(
+                        local,
+                        chosen,
+                        errors=errors,
+                        how=how,
+                        name=os.fspath(spec),
+                        block_size=block_size,
+                    )
                 )
             else:
-                opened.append(open_input(spec, vehicle, errors=errors))
+                opened.append(open_input(spec, vehicle, errors=errors, block_size=block_size))
     except BaseException:
         for item in opened:
             item.close()

@@ -99,6 +99,8 @@ BLOCK_SIZE = 8 << 20
 _WORKERS = 2
 #: Lines looked at, from the end of a block, for an entry to cut the block before.
 _CUT_LOOKBACK = 64
+#: Rows turned into Entry objects at a time.
+_ENTRY_CHUNK = 1024
 #: The error policy: ``"raise"`` (tests, tools) or ``"skip"`` (field logs, remote grep).
 Errors = Literal["raise", "skip"]
 
@@ -1156,7 +1158,18 @@ def _exact_raw(pl: ModuleType, frame: pl.DataFrame, block: bytes, first_line: in
 
 
 def _to_entries(frame: pl.DataFrame, exact: bool) -> Iterator[Entry]:
-    """Yield a batch's rows as :class:`Entry` objects (exact values from ``raw`` if needed)."""
+    """Yield a batch's rows as :class:`Entry` objects (exact values from ``raw`` if needed).
+
+    In slices of :data:`_ENTRY_CHUNK` rows: the Python objects held at once, and the time
+    the GIL is held for one conversion, stay small whatever the block size (a player at 1x
+    must not wait for a whole block's conversion).
+    """
+    for start in range(0, frame.height, _ENTRY_CHUNK):
+        yield from _chunk_entries(frame.slice(start, _ENTRY_CHUNK), exact)
+
+
+def _chunk_entries(frame: pl.DataFrame, exact: bool) -> Iterator[Entry]:
+
     columns = [
         frame[name].to_list()
         for name in ("offset", "var", "source", "type", "double", "text", "line")

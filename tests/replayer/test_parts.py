@@ -300,7 +300,8 @@ def test_remote_specs(tmp_path: Path) -> None:
 
 
 def _peak(session: Path) -> int:
-    (source,) = open_inputs([session])
+    # A block smaller than either log: the reader holds a block, whatever the log's size.
+    (source,) = open_inputs([session], block_size=16 << 10)
     try:
         player = Player(
             [source],
