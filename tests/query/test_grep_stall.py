@@ -140,9 +140,15 @@ def test_glob_attack_grep_never_pauses_the_drain_thread(
 
     assert greps, "no grep ran during the recording"
     assert all(done.returncode == 0 for done in greps), greps[-1].stderr
-    # lines kept reaching the disk while the greps ran
+    # Lines kept reaching the disk while the greps ran. The machine is shared (other test
+    # suites, load 5-15 on 2 cores), so a process may lose its core for a while whatever it
+    # does: allow a rare long wait, never many, and never the seconds a backtracking
+    # matcher holds the GIL for (it stops recording until the grep ends).
     waits = [b - a for a, b in itertools.pairwise(seen)]
-    assert max(waits) < MAX_WAIT, f"longest wait between flushes {max(waits) * 1e3:.0f} ms"
+    long_waits = sorted(w for w in waits if w > MAX_WAIT)
+    said = f"{len(waits)} flushes, longest waits {[round(w * 1e3) for w in long_waits[-5:]]} ms"
+    assert max(waits) < 1.0, said
+    assert len(long_waits) <= max(2, len(waits) // 100), said
     # every sample once, with its own time
     with AlogReader(alog[0]) as reader:
         logstart = reader.logstart
