@@ -29,7 +29,18 @@ from fleetlog.wire.message import MoosMessage
 if TYPE_CHECKING:
     from fleetlog.recorder.engine import Recorder
 
-__all__ = ["RING_SIZE", "CommandHandler", "Reply"]
+__all__ = [
+    "MAX_COMMAND",
+    "MAX_COPIES",
+    "MAX_COPY_BYTES",
+    "MAX_LOG_REQUESTS",
+    "MAX_VAR_NAME",
+    "RING_SIZE",
+    "CommandHandler",
+    "Reply",
+    "clip",
+    "quote",
+]
 
 #: outcomes kept for the status reply
 RING_SIZE = 64
@@ -40,6 +51,40 @@ NOT_YET = ("pause", "resume", "split", "snapshot")
 #: commands run in the control thread (they do not touch what is being recorded)
 _IN_CONTROL_THREAD = ("status", "ack", *NOT_YET)
 
+# What a peer can make the recorder do is bounded; past a bound a command is refused, says
+# why, and costs no more than any other (issue 10).
+#: the longest PLOGGER_CMD text read (a LOG_REQUEST or a path is far shorter)
+MAX_COMMAND = 4096
+#: variables LOG_REQUEST may add over a recorder's life (each may need a subscription)
+MAX_LOG_REQUESTS = 256
+#: the longest variable name a LOG_REQUEST may add
+MAX_VAR_NAME = 256
+#: files COPY_FILE_REQUEST may copy into one session
+MAX_COPIES = 64
+#: the largest file COPY_FILE_REQUEST copies (missions, behaviour files, scripts)
+MAX_COPY_BYTES = 16 << 20
+#: what a MOOS_DEBUG message quotes of a peer's text
+_QUOTE = 80
+#: commands whose refusals the engine reports on MOOS_DEBUG itself, in pLogger's words
+#: (whichever path they came by); every other refusal is reported by the handler
+_SELF_REPORTED = ("log_request", "copy_file", "restart")
+
+
+def clip(text: str) -> str:
+    """Return ``text`` cut to about 80 characters, for MOOS_DEBUG messages."""
+    if len(text) <= _QUOTE:
+        return text
+    return text[:_QUOTE] + f"… ({len(text)} characters)"
+
+
+def quote(text: str) -> str:
+    """Return ``repr(text)`` cut to about 80 characters, for MOOS_DEBUG messages."""
+    if len(text) <= _QUOTE:
+        return repr(text)
+    return repr(text[:_QUOTE]) + f"… ({len(text)} characters)"
+
+
+_STOPPING = Outcome.refused("?", "the recorder is stopping")
 #: sends a control reply (from the drain thread through the recorder's outbox)
 Reply = Callable[[Outcome], None]
 
@@ -62,6 +107,8 @@ class CommandHandler:
         #: the names of the two MOOS command variables (after the app name)
         self.restart_var = "LOGGER_RESTART"
         self.command_var = recorder.app_name.upper() + "_CMD"
+        #: the recorder is stopping: MOOS commands are logged and counted, not run
+        self.closing = False
 
     # -- the ring
 
@@ -82,14 +129,28 @@ class CommandHandler:
     # -- MOOS commands (drain thread)
 
     def moos(self, msg: MoosMessage) -> Outcome:
-        """Run a PLOGGER_CMD or LOGGER_RESTART message, as pLogger does (§6.3, §6.5)."""
+        """Run a PLOGGER_CMD or LOGGER_RESTART message, as pLogger does (§6.3, §6.5).
+
+        Whatever the message holds, the recorder carries on: a command that fails in an
+        unforeseen way is refused, reported on MOOS_DEBUG and counted like any other.
+        """
         value = msg.value
-        if msg.name == self.restart_var:
-            outcome = self._rec.restart()
-            text = value if isinstance(value, str) else repr(value)
-        else:
-            outcome = self._plogger_cmd(value)
-            text = value if isinstance(value, str) else repr(value)
+        if self.closing:
+            # Logged and counted, not run: a flood still queued at shutdown must not delay it.
+            stats = self._rec.stats
+            stats.commands += 1
+            stats.refused_commands += 1
+            return _STOPPING
+        text = value if isinstance(value, str) else repr(value)
+        try:
+            if msg.name == self.restart_var:
+                outcome = self._rec.restart()
+            else:
+                outcome = self._plogger_cmd(value)
+        except Exception as err:  # a peer's command must never stop the recording
+            why = f"the command failed: {err}"
+            self._rec.debug(f"{msg.name} {quote(text)} failed: {quote(str(err))}")
+            outcome = Outcome.refused("?", why[:256])
         self._remember(outcome, when=msg.time, via=msg.name, source=msg.source, text=text)
         return outcome
 
@@ -100,24 +161,32 @@ class CommandHandler:
             kind = "binary value" if isinstance(value, bytes) else "double"
             rec.debug(f"{var} must be a string, got a {kind}: ignored")
             return Outcome.refused("?", f"{var} must be a string, got a {kind}")
+        if len(value) > MAX_COMMAND:
+            rec.debug(f"{var} of {len(value)} characters: at most {MAX_COMMAND}, ignored")
+            return Outcome.refused(
+                "?", f"{var} is {len(value)} characters long: at most {MAX_COMMAND}"
+            )
         text = value.replace(" ", "").replace("\t", "")
         task, sep, argument = text.partition("=")
         if not sep:
-            rec.debug(f"{var} {value!r} is not TASK=VALUE: ignored")
-            return Outcome.refused("?", f"{var} {value!r} is not TASK=VALUE")
+            rec.debug(f"{var} {quote(value)} is not TASK=VALUE: ignored")
+            return Outcome.refused("?", f"{var} {quote(value)} is not TASK=VALUE")
         upper = task.upper()
         if upper == "LOG_REQUEST":
             return rec.log_request(argument)
         if upper == "COPY_FILE_REQUEST":
             return rec.copy_file(argument)
-        rec.debug(f"Dynamic command {task} is not supported")
-        return Outcome.refused(task.lower() or "?", f"dynamic command {task} is not supported")
+        rec.debug(f"Dynamic command {task[:_QUOTE]} is not supported")
+        return Outcome.refused(
+            task.lower()[:_QUOTE] or "?", f"dynamic command {task[:_QUOTE]} is not supported"
+        )
 
     # -- control requests
 
     def refuse_request(self, text: str, why: str, source: str = "") -> None:
         """Remember a control request that could not be read (it got an error reply)."""
         now = self._clock()
+        self._rec.debug(f"refused a control request: {quote(why)}")
         self._remember(Outcome.refused("?", why), when=now, via="control", source=source, text=text)
 
     def submit(self, request: ControlRequest, reply: Reply) -> None:
@@ -165,6 +234,8 @@ class CommandHandler:
             reply(self._record(request, Outcome.refused(request.cmd, why)))
 
     def _record(self, request: ControlRequest, outcome: Outcome) -> Outcome:
+        if not outcome.ok and outcome.why is not None and request.cmd not in _SELF_REPORTED:
+            self._rec.debug(f"refused control command {request.cmd}: {clip(outcome.why)}")
         if request.cmd != "status":  # the poll that reads the ring does not fill it
             when = request.time if request.time is not None else self._clock()
             self._remember(

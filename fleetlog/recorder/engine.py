@@ -12,6 +12,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import os
+import stat
 import time
 import uuid
 from collections.abc import Callable, Sequence
@@ -20,13 +21,22 @@ from pathlib import Path
 from typing import Any
 
 from fleetlog import __version__
-from fleetlog.errors import FleetlogError, MissionError, StorageError
+from fleetlog.errors import FleetlogError, MissionError, RecorderError, StorageError
 from fleetlog.moos.alog import LineFormatter, Variant, source_field
 from fleetlog.moos.mission import LoggerConfig, LogSpec, parse_log_spec
+from fleetlog.moos.naming import copy_file_name
 from fleetlog.moos.patterns import Verdict, WildcardClassifier, name_to_chunk
 from fleetlog.moos.slog import SlogTable, SlotPatch
 from fleetlog.moos.ylog import format_ylog_line
-from fleetlog.recorder.control import CommandHandler
+from fleetlog.recorder.control import (
+    MAX_COPIES,
+    MAX_COPY_BYTES,
+    MAX_LOG_REQUESTS,
+    MAX_VAR_NAME,
+    CommandHandler,
+    clip,
+    quote,
+)
 from fleetlog.storage.metafile import boot_id, host_name, mark_cut_sessions
 from fleetlog.storage.procinfo import ProcessMonitor
 from fleetlog.storage.session import SessionLayout, SessionWriter
@@ -194,6 +204,11 @@ class Recorder:
         self._in_fallback = False
         #: keys already reported as naming no variable
         self._unreadable: set[str] = set()
+        #: variables added by LOG_REQUEST so far (at most MAX_LOG_REQUESTS)
+        self._requested = 0
+        #: copies made by COPY_FILE_REQUEST into the session they were made in
+        self._copy_session: SessionWriter | None = None
+        self._copies = 0
         #: samples lost on the way per publisher (its Zenoh id), not yet on MOOS_DEBUG
         self._missed: dict[str, int] = {}
         #: the open session's metadata, and the counters when it opened
@@ -629,27 +644,47 @@ class Recorder:
     # The MOOS and control paths read commands in recorder/control.py and act through these.
 
     def log_request(self, argument: str) -> Outcome:
-        """Log one more variable (LOG_REQUEST; ``argument`` as a ``Log =`` value)."""
+        """Log one more variable (LOG_REQUEST; ``argument`` as a ``Log =`` value).
+
+        At most :data:`MAX_LOG_REQUESTS` variables over the recorder's life, each named in
+        at most :data:`MAX_VAR_NAME` characters; a subscription the transport refuses
+        (its own bound) refuses the request, which then changes nothing.
+        """
         try:
             spec = parse_log_spec(argument)
         except MissionError as err:
-            self.debug(f"failed to process dynamic log request {argument!r}: {err.reason}")
-            return Outcome.refused("log_request", err.reason)
-        if spec.var in self._specs or not self._classifier.add_log_var(spec.var):
+            reason = err.reason if len(err.reason) <= 200 else err.reason[:199] + "…"
+            self.debug(f"failed to process dynamic log request {quote(argument)}: {reason}")
+            return Outcome.refused("log_request", err.reason[:256])
+        if spec.var in self._specs or self._classifier.is_explicit(spec.var):
             self.debug("failed to process dynamic log request  - see pLogger output\n")
-            return Outcome.refused("log_request", f"{spec.var} is logged already")
-        self._specs[spec.var] = spec
-        self._vars.pop(spec.var, None)
-        if spec.monitor:
-            self.monitored.append(spec.var)
+            return Outcome.refused("log_request", f"{spec.var[:MAX_VAR_NAME]} is logged already")
+        why = None
+        if len(spec.var) > MAX_VAR_NAME:
+            why = f"the variable's name is {len(spec.var)} characters long: at most {MAX_VAR_NAME}"
+        elif self._requested >= MAX_LOG_REQUESTS:
+            why = f"at most {MAX_LOG_REQUESTS} variables may be added by LOG_REQUEST"
+        if why is not None:
+            self.debug(f"refused dynamic log request {quote(spec.var)}: {why}")
+            return Outcome.refused("log_request", why)
         did = f"now logging {spec.var}"
         if self._subscribe is not None:
             try:
                 self._subscribe(spec.var)
+            except RecorderError as err:
+                # The transport's own bound (subscriptions): nothing was added.
+                self.debug(f"refused dynamic log request {quote(spec.var)}: {err}")
+                return Outcome.refused("log_request", str(err))
             except FleetlogError as err:
                 # Logged if a wider subscription brings it in; the operator must know.
                 self.debug(f"could not subscribe to {spec.var}: {err}")
                 did += f" (but the subscription failed: {err})"
+        self._classifier.add_log_var(spec.var)
+        self._requested += 1
+        self._specs[spec.var] = spec
+        self._vars.pop(spec.var, None)
+        if spec.monitor:
+            self.monitored.append(spec.var)
         if self.synclog is not None:
             had_free = bool(self.synclog.placeholders)
             offset = self._clock() - self.logstart
@@ -662,8 +697,59 @@ class Recorder:
         return Outcome.done("log_request", did)
 
     def copy_file(self, argument: str) -> Outcome:
-        """Copy a file into the session (COPY_FILE_REQUEST), from the allowed directories."""
+        """Copy a file into the session (COPY_FILE_REQUEST), from the allowed directories.
+
+        Refused, with a MOOS_DEBUG message that says why: a path outside the allowed
+        directories (after following symlinks), a hidden file or directory (a component
+        starting with ``.``, in the request or in what it resolves to), anything but a
+        regular file (directories, FIFOs, devices), a file over :data:`MAX_COPY_BYTES`, and
+        more than :data:`MAX_COPIES` copies in a session. The file is opened and checked
+        here; its bytes are copied by the background writer, off the recording thread.
+        """
         requested = argument
+        refused = self._copy_refused(requested)
+        if isinstance(refused, Outcome):
+            return refused
+        file, target_name = refused
+        # The lines already written reach the OS before the copy's.
+        self.flush()
+        session = self.session
+        if session is None:
+            file.close()
+            self.debug("failed to open file for writing")
+            return Outcome.refused("copy_file", "no session is open")
+        if self._copy_session is not session:
+            self._copy_session, self._copies = session, 0
+        if self._copies >= MAX_COPIES:
+            file.close()
+            return self._refuse_copy(requested, f"at most {MAX_COPIES} copies per session")
+        self._copies += 1
+
+        def copy() -> None:
+            with file:
+                try:
+                    session.copy_from(file, requested, MAX_COPY_BYTES)
+                except (StorageError, FleetlogError) as err:
+                    self.stats.write_errors += 1
+                    self.debug(f"COPY_FILE_REQUEST for {clip(requested)} failed: {err}")
+
+        self._background(copy)
+        return Outcome.done("copy_file", f"copying {requested} to {target_name}")
+
+    def _refuse_copy(self, requested: str, why: str, *, unreadable: bool = False) -> Outcome:
+        self.stats.refused_copies += 1
+        if unreadable:
+            self.debug("failed to open file for reading")  # pLogger's words for these
+        else:
+            self.debug(f"refused COPY_FILE_REQUEST for {clip(requested)}: {why}")
+        return Outcome.refused("copy_file", f"{requested[:256]}: {why}")
+
+    def _copy_refused(self, requested: str) -> Outcome | tuple[Any, str]:
+        """Check a copy request; return the open file and the copy's name, or the refusal."""
+        try:
+            target_name = copy_file_name(requested)
+        except FleetlogError:
+            return self._refuse_copy(requested, "it names no file", unreadable=True)
         source = Path(requested)
         if not source.is_absolute():
             source = self._cwd / source
@@ -672,32 +758,34 @@ class Recorder:
             # a Zenoh peer's business, so containment is decided before existence.
             resolved = source.resolve()
         except (OSError, RuntimeError, ValueError):
-            self.debug("failed to open file for reading")
-            return Outcome.refused("copy_file", f"cannot read {requested}")
-        if not any(resolved.is_relative_to(d) for d in self.copy_dirs):
-            self.stats.refused_copies += 1
-            self.debug(
-                f"refused COPY_FILE_REQUEST for {requested}: outside the directories "
-                "the recorder may copy from"
+            return self._refuse_copy(requested, "cannot read it", unreadable=True)
+        home = next((d for d in self.copy_dirs if resolved.is_relative_to(d)), None)
+        if home is None:
+            return self._refuse_copy(
+                requested, "outside the directories the recorder may copy from"
             )
-            return Outcome.refused(
-                "copy_file", f"{requested} is outside the directories the recorder may copy from"
-            )
-        # A trailing "/" names a directory, as open() would say; pathlib would drop it.
-        if requested.endswith("/") or not resolved.is_file():
-            self.debug("failed to open file for reading")
-            return Outcome.refused("copy_file", f"cannot read {requested}")
-        # A large copy takes a while: the lines already written reach the OS first.
-        self.flush()
-        if self.session is None:
-            self.debug("failed to open file for writing")
-            return Outcome.refused("copy_file", "no session is open")
+        asked = [part for part in Path(requested).parts if part not in (".", "..")]
+        if any(part.startswith(".") for part in (*asked, *resolved.relative_to(home).parts)):
+            return self._refuse_copy(requested, "hidden files and directories are never copied")
+        flags = os.O_RDONLY | os.O_NONBLOCK | os.O_NOFOLLOW | os.O_CLOEXEC
         try:
-            target = self.session.copy_file(resolved, requested)
-        except FleetlogError as err:
-            self.debug("failed to open file for writing")
-            return Outcome.refused("copy_file", str(err))
-        return Outcome.done("copy_file", f"copied {requested} to {target.name}")
+            fd = os.open(resolved, flags)
+        except (OSError, ValueError) as err:
+            reason = err.strerror if isinstance(err, OSError) else str(err)
+            return self._refuse_copy(requested, f"cannot read it ({reason})", unreadable=True)
+        try:
+            info = os.fstat(fd)
+        except OSError:
+            os.close(fd)
+            raise
+        if stat.S_ISREG(info.st_mode) and info.st_size <= MAX_COPY_BYTES:
+            return os.fdopen(fd, "rb"), target_name
+        os.close(fd)
+        if stat.S_ISDIR(info.st_mode):
+            return self._refuse_copy(requested, "a directory", unreadable=True)
+        if not stat.S_ISREG(info.st_mode):
+            return self._refuse_copy(requested, "not a regular file (a FIFO, a device or a socket)")
+        return self._refuse_copy(requested, f"larger than {MAX_COPY_BYTES} bytes ({info.st_size})")
 
     # ---------------------------------------------------------------------------------------
     # Timers and flushing

@@ -53,12 +53,17 @@ __all__ = ["RecorderService", "ServiceOptions"]
 
 #: more subscriptions than this become one subscription to every variable, filtered here
 MAX_SUBSCRIBERS = 8
+#: subscribers LOG_REQUEST may add (a request whose variable is already covered adds none)
+MAX_REQUEST_SUBSCRIBERS = 32
 _FLUSH_DELAY = 0.005
 _TICK = 0.02
 #: inside a long drain batch, whether a flush is due is checked every this many samples
 #: (a power of two): at 6-10 µs per sample that is every 0.2-0.3 ms, and the check (0.11 µs)
 #: costs 0.003 µs per sample
 _CHECK_EVERY = 32
+#: the longest one subscriber's batch may hold the drain thread before the others get a
+#: turn: a flood of costly commands on one key must not hold back the variables on the rest
+_SLICE = 0.01
 
 
 class _Fifo(Protocol):
@@ -147,6 +152,7 @@ class RecorderService:
         self.recorder: Recorder | None = None
         self._subscribers: list[_Fifo] = []
         self._chunks: set[str] = set()
+        self._requested_subscribers = 0
         self._session: ZenohSession | None = None
         self._var_prefix = f"{options.root}/{name_to_chunk(options.vehicle)}/var/"
         #: samples DROP publishers lost on the way (sample-miss detection, docs/wire.md)
@@ -171,8 +177,23 @@ class RecorderService:
         self._subscribers.append(sub)
 
     def _subscribe_var(self, name: str) -> None:
-        """A LOG_REQUEST asks for one more variable."""
-        self._subscribe_chunk(name_to_chunk(name))
+        """A LOG_REQUEST asks for one more variable.
+
+        Raises:
+            RecorderError: it needs a subscriber of its own and the recorder holds
+                :data:`MAX_REQUEST_SUBSCRIBERS` already (the drain thread visits every
+                subscriber on every pass, so each one costs every sample a little).
+        """
+        chunk = name_to_chunk(name)
+        if not any(chunk_includes(have, chunk) for have in self._chunks):
+            if self._requested_subscribers >= MAX_REQUEST_SUBSCRIBERS:
+                msg = (
+                    f"the recorder holds {MAX_REQUEST_SUBSCRIBERS} subscriptions for LOG_REQUEST "
+                    "already (a WildcardPattern in the mission covers many variables at once)"
+                )
+                raise RecorderError(msg)
+            self._requested_subscribers += 1
+        self._subscribe_chunk(chunk)
 
     def _initial_chunks(self, recorder: Recorder) -> list[str]:
         chunks = list(recorder.subscription_chunks())
@@ -231,6 +252,9 @@ class RecorderService:
             if on_ready is not None:
                 on_ready(recorder)
             self._loop(recorder)
+            # What is still queued is logged; commands in it are no longer run (a flood of
+            # them would hold the shutdown past its bound).
+            recorder.commands.closing = True
             self._drain(recorder, deadline=time.monotonic() + 2.0)
         finally:
             # No more commands; those still queued are refused, not left unanswered.
@@ -355,11 +379,23 @@ class RecorderService:
 
         return ServiceQueryable(session, key, on_query)
 
-    def _pump(self, recv: Callable[[], Any], recorder: Recorder, decoder: SampleDecoder) -> int:
-        """Log every sample ``recv`` yields until it yields None; return how many."""
+    def _pump(
+        self,
+        recv: Callable[[], Any],
+        recorder: Recorder,
+        decoder: SampleDecoder,
+        deadline: float | None = None,
+    ) -> int:
+        """Log every sample ``recv`` yields until it yields None (or ``deadline``); return how many.
+
+        Under a flood that never lets the channel empty, the deadline (monotonic, checked
+        every 256 samples) is what ends the pump.
+        """
         count = 0
         sample = recv()
         while sample is not None:
+            if deadline is not None and not count & 255 and time.monotonic() > deadline:
+                break
             info = sample.source_info
             if info is not None:
                 self._misses.seen(info, sample)
@@ -380,7 +416,7 @@ class RecorderService:
             got = 0
             for sub in self._subscribers:
                 with translate_zerror("subscriber"):
-                    got += self._pump(sub.try_recv, recorder, decoder)
+                    got += self._pump(sub.try_recv, recorder, decoder, deadline)
             if not got:
                 self._drained_at = time.monotonic()
                 break
@@ -434,6 +470,7 @@ class RecorderService:
             for sub in self._subscribers:
                 try_recv = sub.try_recv
                 batch = 0
+                began = monotonic()
                 sample = try_recv()
                 while sample is not None:
                     # Numbered samples (DROP publishers) are checked for gaps: 0.05 µs for
@@ -447,8 +484,11 @@ class RecorderService:
                     else:
                         recorder.unreadable(str(sample.key_expr))
                     batch += 1
-                    if not batch & mask and recorder.flush_due(_FLUSH_DELAY):
-                        recorder.flush()
+                    if not batch & mask:
+                        if recorder.flush_due(_FLUSH_DELAY):
+                            recorder.flush()
+                        if monotonic() - began > _SLICE:
+                            break
                     if batch >= 8192:
                         break
                     sample = try_recv()

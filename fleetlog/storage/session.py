@@ -18,6 +18,7 @@ import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import BinaryIO
 
 from fleetlog.errors import StorageError
 from fleetlog.moos.alog import BinaryRef, Variant, format_banner
@@ -300,6 +301,35 @@ class SessionWriter:
         except OSError as err:
             msg = f"cannot copy {source} to {target}: {err.strerror}"
             raise StorageError(msg) from err
+        if target not in self.copies:
+            self.copies.append(target)
+        return target
+
+    def copy_from(self, source: BinaryIO, requested: str, limit: int) -> Path:
+        """Copy an open file into the session as COPY_FILE_REQUEST does (``stem._ext``).
+
+        The caller opened and checked the file; at most ``limit`` bytes are copied (a file
+        that grew past it while being copied is removed, not cut).
+
+        Raises:
+            StorageError: the copy could not be written, or the file grew past ``limit``.
+        """
+        target = self.dir_path / copy_file_name(requested)
+        try:
+            with open(target, "wb") as out:
+                copied = 0
+                while chunk := source.read(1 << 20):
+                    copied += len(chunk)
+                    if copied > limit:
+                        break
+                    out.write(chunk)
+        except OSError as err:
+            msg = f"cannot copy {requested} to {target}: {err.strerror}"
+            raise StorageError(msg) from err
+        if copied > limit:
+            target.unlink(missing_ok=True)
+            msg = f"{requested} grew past {limit} bytes while it was copied"
+            raise StorageError(msg)
         if target not in self.copies:
             self.copies.append(target)
         return target

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import os
 import shutil
 import tempfile
 from pathlib import Path
@@ -22,10 +23,12 @@ from fuzzer import Fuzzer
 from hostile import (
     alog_files,
     attachments,
+    control_requests,
     encodings,
     key_chunks,
     mission_texts,
     payloads,
+    plogger_cmds,
     query_parameters,
     selector_keys,
 )
@@ -37,10 +40,12 @@ from fleetlog.moos.mission import parse_mission
 from fleetlog.moos.patterns import MoosGlob
 from fleetlog.moos.slog import parse_slog
 from fleetlog.moos.ylog import parse_ylog
+from fleetlog.recorder.control import MAX_COPY_BYTES, MAX_LOG_REQUESTS
 from fleetlog.recorder.engine import Recorder
 from fleetlog.storage.alogscan import read_head
 from fleetlog.storage.readers import AlogReader
 from fleetlog.transport.bus import SampleDecoder
+from fleetlog.wire.control import ControlRequest, Outcome, parse_control_request
 from fleetlog.wire.fields import MAX_TIME, clean_name, clean_origin
 from fleetlog.wire.message import Kind, MoosMessage, attachment_fields
 from fleetlog.wire.query import (
@@ -312,3 +317,110 @@ def check_alog_file(case: tuple[str, bytes]) -> None:
 
 def test_fuzz_alog_file(fuzz: Fuzzer) -> None:
     fuzz.run(alog_files(), check_alog_file)
+
+
+# --------------------------------------------------------------------------------------------
+# Commands: PLOGGER_CMD strings and control requests, against one long-lived recorder
+
+
+class _CommandRig:
+    """A recorder whose mission directory holds secrets, FIFOs and links out, reused by every
+    case of a run (so the caps on what a peer can add are reached, as in a flood)."""
+
+    def __init__(self) -> None:
+        self.where = Path(tempfile.mkdtemp(prefix="fleetlog-fuzz-"))
+        mission = self.where / "mission"
+        (mission / ".ssh").mkdir(parents=True)
+        (mission / ".ssh" / "id_rsa").write_text("SECRET\n")
+        (mission / ".hidden").write_text("SECRET\n")
+        (mission / "sub" / ".hidden").mkdir(parents=True)
+        (mission / "sub" / ".hidden" / "x").write_text("SECRET\n")
+        (mission / "m.moos").write_text("// mission\n")
+        os.mkfifo(mission / "fifo")
+        (mission / "link_out").symlink_to("/etc/passwd")
+        (mission / "link_in").symlink_to(mission / "m.moos")
+        with open(mission / "big.bin", "wb") as f:
+            f.truncate(MAX_COPY_BYTES + 1)
+        self.mission = mission
+        self.clock = _Clock()
+        cfg = parse_mission(
+            f"ProcessConfig = pLogger\n{{\n  Path = {self.where / 'logs'}\n  SyncLog = true\n"
+            "  DynamicSyncLogColumns = 3\n  Log = NAV_X @ 0\n}\n",
+            "f.moos",
+        ).logger_config()
+        self.subscribed = 0
+        self.rec = Recorder(
+            cfg,
+            vehicle="V",
+            publish=lambda msg: None,
+            cwd=mission,
+            copy_dirs=[mission],
+            clock=self.clock,
+            subscribe=self._subscribe,
+        )
+        self.rec.start()
+
+    def _subscribe(self, name: str) -> None:
+        self.subscribed += 1
+
+    def probe(self) -> None:
+        """A plain sample is still logged after whatever came before."""
+        before = self.rec.stats.logged
+        self.rec.handle(MoosMessage("NAV_X", 1.0, self.clock.t, "iOk", "", "V"))
+        assert self.rec.stats.logged == before + 1
+        assert self.subscribed <= MAX_LOG_REQUESTS
+
+    def check_no_leak(self) -> None:
+        self.rec.stop()
+        for found in (self.where / "logs").rglob("*"):
+            if found.is_file():
+                assert b"SECRET" not in found.read_bytes(), found
+        shutil.rmtree(self.where, ignore_errors=True)
+
+
+def check_plogger_cmd(rig: _CommandRig, value: str | float | bytes) -> None:
+    rig.clock.t += 0.01
+    before = rig.rec.stats.commands
+    rig.rec.handle(MoosMessage("PLOGGER_CMD", value, rig.clock.t, "iEvil", "", "V"))
+    assert rig.rec.stats.commands == before + 1
+    last = rig.rec.commands.recent()[-1]
+    assert last["ok"] or last["why"]
+    rig.probe()
+
+
+def test_fuzz_plogger_cmd(fuzz: Fuzzer) -> None:
+    rig = _CommandRig()
+    try:
+        fuzz.run(plogger_cmds(), lambda value: check_plogger_cmd(rig, value))
+    finally:
+        rig.check_no_leak()
+    stats = rig.rec.stats
+    fuzz.note(f"{stats.refused_commands:,} refused ({stats.refused_copies:,} copies)")
+
+
+def check_control_request(rig: _CommandRig, case: tuple[bytes, str]) -> None:
+    payload, parameters = case
+    try:
+        request = parse_control_request(payload, parameters)
+    except FormatError:
+        rig.rec.commands.refuse_request(payload[:256].decode("utf-8", "replace"), "bad request")
+        return
+    assert isinstance(request, ControlRequest)
+    replies: list[Outcome] = []
+    rig.rec.commands.submit(request, replies.append)
+    while rig.rec.commands.pending:
+        rig.rec.commands.run_queued()
+    (reply,) = replies
+    assert reply.ok or reply.why
+    rig.probe()
+
+
+def test_fuzz_control_request(fuzz: Fuzzer) -> None:
+    rig = _CommandRig()
+    try:
+        fuzz.run(
+            st.tuples(control_requests, st.just("") | query_parameters()),
+            lambda case: check_control_request(rig, case),
+        )
+    finally:
+        rig.check_no_leak()

@@ -146,7 +146,7 @@ def test_moos_commands_keep_their_debug_text_and_land_in_the_ring(
         "why": None,
     }
     assert ring[1]["why"] == "B is logged already"
-    assert ring[3]["did"] == "copied mission/a.txt to a._txt"
+    assert ring[3]["did"] == "copying mission/a.txt to a._txt"
     assert ring[4]["text"] == "3.0"
     assert ring[6]["did"] == f"started session {rig.rec.session.root}"  # type: ignore[union-attr]
     stats = rig.rec.stats
@@ -178,7 +178,7 @@ def test_control_requests_go_through_the_same_handler(
     # the same MOOS_DEBUG as the PLOGGER_CMD path
     assert rig.debugs() == ["failed to process dynamic log request  - see pLogger output\n"]
     copied = rig.control({"cmd": "copy_file", "path": "mission/notes.txt"})
-    assert (copied.ok, copied.did) == (True, "copied mission/notes.txt to notes._txt")
+    assert (copied.ok, copied.did) == (True, "copying mission/notes.txt to notes._txt")
     assert (rig.dir / "notes._txt").read_text() == "n"
     noted = rig.control({"cmd": "note", "key": "site", "value": "bay"})
     assert noted.ok

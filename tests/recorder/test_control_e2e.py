@@ -137,7 +137,7 @@ def test_control_commands_and_the_ring_over_zenoh(
     assert typed["ok"]
     copied = ask(zenoh_session, {"cmd": "copy_file", "path": str(tmp_path / "notes.txt")})
     assert isinstance(copied, dict)
-    assert copied["did"] == f"copied {tmp_path / 'notes.txt'} to notes._txt"
+    assert copied["did"] == f"copying {tmp_path / 'notes.txt'} to notes._txt"
     paused = ask(zenoh_session, {"cmd": "pause"})
     assert isinstance(paused, dict)
     assert (paused["ok"], paused["did"]) == (False, "")
