@@ -16,8 +16,10 @@ from fleetlog.moos.patterns import chunk_to_name, glob_to_chunk, name_to_chunk
 
 __all__ = [
     "DEFAULT_ROOT",
+    "MAX_NAME_BYTES",
     "SERVICE",
     "VarKey",
+    "check_component",
     "check_root",
     "fleet_service_selector",
     "parse_service_key",
@@ -29,6 +31,8 @@ __all__ = [
 ]
 
 DEFAULT_ROOT = "fleet"
+#: the longest session or file name (one path component)
+MAX_NAME_BYTES = 255
 #: the verbatim chunk under which fleetlog's own services live
 SERVICE = "@fleetlog"
 
@@ -111,3 +115,35 @@ def parse_service_key(root: str, key: str) -> tuple[str, tuple[str, ...]]:
         msg = f"key {key!r} is not a fleetlog service key under {root!r}"
         raise FormatError(msg)
     return chunk_to_name(parts[0]), tuple(parts[2:])
+
+
+def check_component(name: str, what: str) -> str:
+    r"""Check that a session or file name is one plain path component.
+
+    Args:
+        name: the name, already unescaped from its key chunk.
+        what: ``"session"`` or ``"file"``, for the message.
+
+    Returns:
+        The name unchanged.
+
+    Raises:
+        FormatError: the name is empty, ``.`` or ``..``, holds ``/``, ``\`` or NUL, or is
+            longer than 255 bytes; each could reach outside the session.
+    """
+    if not name:
+        reason = "is empty"
+    elif name in (".", ".."):
+        reason = "is a relative directory"
+    elif "/" in name:
+        reason = "holds '/' (only one path component is allowed)"
+    elif "\\" in name:
+        reason = "holds '\\' (only one path component is allowed)"
+    elif "\x00" in name:
+        reason = "holds a NUL character"
+    elif len(name.encode("utf-8", "surrogateescape")) > MAX_NAME_BYTES:
+        reason = f"is longer than {MAX_NAME_BYTES} bytes"
+    else:
+        return name
+    msg = f"{what} name {name[:80]!r} {reason}"
+    raise FormatError(msg)
