@@ -16,6 +16,7 @@ from fleetlog.errors import QueryError
 from fleetlog.shore.client import FleetClient
 from fleetlog.shore.report import FleetReport
 from fleetlog.wire.query import LatestInfo
+from fleetlog.wire.version import version_problem
 
 __all__ = ["fleet"]
 
@@ -94,6 +95,11 @@ def fleet(
     for vehicle in view.names:
         report.done[vehicle] = "up"
     report_conflicts(latest)
+    for vehicle, answers in sorted(latest.items()):
+        for found in answers:
+            problem = version_problem(vehicle, found.wire)
+            if problem is not None:
+                warn(problem)
     if as_json:
         for vehicle in view.names:
             answers = latest.get(vehicle, [])

@@ -35,6 +35,7 @@ from fleetlog.storage.catalog import LogCatalog
 from fleetlog.storage.columnar import limit_threads
 from fleetlog.transport.notify import Notifier, Watchdog
 from fleetlog.transport.queries import ZenohSession
+from fleetlog.transport.session import SessionOptions, open_session, summarize
 
 __all__ = ["load_config", "read_mission", "record"]
 
@@ -86,10 +87,19 @@ def _default_vehicle() -> str:
     return socket.gethostname().split(".")[0] or "vehicle"
 
 
-def _log_server(root: str, vehicle: str, cfg: LoggerConfig) -> Attach:
-    """Serve the recorder's log root to shore through the query services."""
+def _log_server(root: str, vehicle: str, cfg: LoggerConfig, zopts: SessionOptions) -> Attach:
+    """Serve the recorder's log root to shore through the query services.
 
-    def attach(session: ZenohSession, recorder: Recorder) -> Callable[[], None]:
+    Behind a router, the server has a Zenoh session of its own: its replies (1 MiB file
+    ranges) must not share the recorder's link to the router. A router reads each link in
+    order, and one that waits for a full radio to take a range holds up everything behind it
+    on that link: the recorder's own posts and its answers to commands. A recorder that is a
+    peer others connect to (``-l``) shares its session: nothing would route to a second one.
+    """
+    summary = summarize(zopts)
+    own_session = bool(summary.connect) and not summary.listen
+
+    def attach(recorder_session: ZenohSession, recorder: Recorder) -> Callable[[], None]:
         current = recorder.session
         log_root = current.dir_path.parent if current is not None else Path.cwd() / cfg.path
 
@@ -104,8 +114,22 @@ def _log_server(root: str, vehicle: str, cfg: LoggerConfig) -> Attach:
             active=active,
             hint=hint if hint.is_absolute() else Path.cwd() / hint,
         )
-        server = LogServer(session, catalog, root=root, vehicle=vehicle).start()
-        return server.close
+        if not own_session:
+            return LogServer(recorder_session, catalog, root=root, vehicle=vehicle).start().close
+        session = open_session(zopts)
+        try:
+            server = LogServer(session, catalog, root=root, vehicle=vehicle).start()
+        except BaseException:
+            session.close()
+            raise
+
+        def close() -> None:
+            try:
+                server.close()
+            finally:
+                session.close()
+
+        return close
 
     return attach
 
@@ -204,7 +228,7 @@ def record(
             zenoh=zopts,
             mission_path=mission_path,
             copy_dirs=tuple(dirs),
-            attach=None if no_serve else _log_server(key_root, veh, cfg),
+            attach=None if no_serve else _log_server(key_root, veh, cfg, zopts),
             watchdog=watchdog.kick if watchdog.enabled else None,
         ),
     )

@@ -33,6 +33,23 @@ LEASE_MS = 15000
 BLOCK_CLOSE_US = 30_000_000
 #: connection and TLS handshakes over a 200 ms, lossy link
 OPEN_TIMEOUT_MS = 30000
+#: the urgent radio link's socket send buffer (bytes): what the kernel holds is sent in
+#: order, so a command's answer waits behind all of it. Linux's default grows to megabytes
+#: (tens of seconds at 1 Mbit/s); this is a fraction of a second.
+RADIO_SNDBUF = 16384
+#: the shore router's batches (bytes; each link takes the smaller of its two ends'): a batch
+#: goes out whole, so a command's answer waits for the one being sent: 0.13 s at 1 Mbit/s
+#: instead of 0.5 s for Zenoh's 64 KiB. Only links to the shore are affected; a vehicle's
+#: own (loopback) links keep Zenoh's.
+SHORE_BATCH = 16384
+#: two links across the radio, by Zenoh priority (0 control ... 7 background): control,
+#: commands and status (interactive) on one, with a small send buffer; data and bulk
+#: transfers (fetch ranges and grep ask at data_low) on the other, with the kernel's: the
+#: TCP buffers and retransmissions of a fetch never delay a command
+URGENT_PRIORITIES = "0-4"
+BULK_PRIORITIES = "5-7"
+#: links per transport each router admits: the two above
+MAX_LINKS = 2
 #: reconnect: first after 1 s, backing off to every 8 s
 RETRY = {"period_init_ms": 1000, "period_max_ms": 8000, "period_increase_factor": 2}
 
@@ -60,7 +77,12 @@ def _common(
     return {
         "scouting": {"multicast": {"enabled": False}, "gossip": {"enabled": False}},
         "transport": {
-            "unicast": {"open_timeout": OPEN_TIMEOUT_MS, "accept_timeout": OPEN_TIMEOUT_MS},
+            "shared_memory": {"enabled": False},
+            "unicast": {
+                "open_timeout": OPEN_TIMEOUT_MS,
+                "accept_timeout": OPEN_TIMEOUT_MS,
+                "max_links": MAX_LINKS,
+            },
             "link": {
                 "protocols": ["tls"],
                 "tx": {
@@ -80,6 +102,8 @@ _COMMON_NOTES = {
     "scouting": "No multicast or gossip scouting: peers that find each other connect around the\n"
     "routers' access control (eclipse-zenoh/zenoh#2137).",
     "transport/link/protocols": "TLS links only: nothing is opened or accepted in clear.",
+    "transport/shared_memory/enabled": "Everything through the TLS links: no shared-memory"
+    " shortcut around them\n(two machines never share memory; the demo's namespaces do).",
     "transport/link/tx/lease": "A radio that fades for a few seconds keeps its session.",
     "transport/link/tx/queue/congestion_control/block/wait_before_close": "A slow, lossy link"
     " can hold a batch longer than Zenoh's 5 s before closing it.",
@@ -114,16 +138,26 @@ def router_config(fleet: Fleet, machine: Machine, base: str) -> str:
         notes["connect"] = "The vehicles' routers dial in; the shore dials nobody."
     else:
         conf["connect"] = {
-            "endpoints": [fleet.shore.dial()],
+            "endpoints": [
+                f"{fleet.shore.dial()}?prio={URGENT_PRIORITIES}#so_sndbuf={RADIO_SNDBUF}",
+                f"{fleet.shore.dial()}?prio={BULK_PRIORITIES}",
+            ],
             "timeout_ms": -1,
             "exit_on_failure": False,
             "retry": RETRY,
         }
         notes["connect"] = (
             "Only this router crosses the radio: it dials the shore's router and keeps retrying"
-            "\nin the background, whatever the link does."
+            "\nin the background, whatever the link does. A small socket send buffer on the"
+            "\nradio: what the kernel holds goes out in order, whatever Zenoh's priorities."
         )
     conf.update(_common(fleet, machine_dir, base, ROUTER_CERT, ROUTER_KEY, listen=True))
+    if is_shore:
+        conf["transport"]["link"]["tx"]["batch_size"] = SHORE_BATCH
+        notes["transport/link/tx/batch_size"] = (
+            "Small batches on the shore's links (each link takes the smaller of its two ends'):"
+            "\na command's answer waits at most for one batch on a slow radio."
+        )
     if not is_shore:
         # What the shore subscribes to must never stall the vehicle: data put with BLOCK
         # congestion control (every variable a vehicle app publishes) would otherwise wait

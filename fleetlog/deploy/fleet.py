@@ -111,7 +111,9 @@ class Machine:
         """The endpoint its router listens on."""
         if self.local_only:
             return endpoint(self.addresses[0], self.port)
-        return endpoint("[::]", self.port)
+        # IPv4's any-address: "[::]" fails to resolve on hosts without a global IPv6 address
+        # (getaddrinfo's AI_ADDRCONFIG), which radio networks often are.
+        return endpoint("0.0.0.0", self.port)
 
     def dial(self) -> str:
         """The endpoint others dial to reach its router."""
@@ -122,7 +124,7 @@ class Machine:
 
     def local_dial(self) -> str:
         """The endpoint processes on the machine itself dial."""
-        host = self.addresses[0] if self.local_only else "localhost"
+        host = self.addresses[0] if self.local_only else "127.0.0.1"
         return endpoint(host, self.port)
 
     def cert_names(self) -> tuple[str, ...]:

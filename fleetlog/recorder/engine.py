@@ -43,6 +43,7 @@ from fleetlog.storage.session import SessionLayout, SessionWriter
 from fleetlog.wire.control import Outcome
 from fleetlog.wire.message import MoosMessage
 from fleetlog.wire.session_meta import CLOSED, MAX_GAPS, OPEN, Gap, SessionMeta
+from fleetlog.wire.version import WIRE_VERSION
 
 __all__ = ["SKEW_TOLERANCE", "Recorder", "RecorderStats"]
 
@@ -475,6 +476,7 @@ class Recorder:
             "session": session.root if session is not None else None,
             **self.stats.as_dict(),
             "commands": self.commands.recent(),
+            "wire": WIRE_VERSION,
         }
 
     # ---------------------------------------------------------------------------------------

@@ -248,6 +248,20 @@ class GrepStream:
             yield record_entry(record)
 
 
+def _priority(selector: str) -> str:
+    """A query's Zenoh priority by what it asks.
+
+    Replies travel at their query's priority, so on a slow link commands and status overtake
+    file ranges and greps (docs/deploy.md, "Slow links").
+    """
+    key = selector.split("?", 1)[0]
+    if "/@fleetlog/file/" in key or "/@fleetlog/grep/" in key:
+        return "bulk"
+    if key.endswith(("/@fleetlog/control", "/@fleetlog/status", "/replay/control")):
+        return "command"
+    return "normal"
+
+
 class FleetClient:
     """Asks the fleet's vehicles about their logs over one Zenoh session.
 
@@ -389,7 +403,9 @@ class FleetClient:
     # -- queries
 
     def _get(self, selector: str, timeout: float, payload: bytes | None = None) -> PendingQuery:
-        return start_query(self.zenoh, selector, timeout=timeout, payload=payload)
+        return start_query(
+            self.zenoh, selector, timeout=timeout, payload=payload, priority=_priority(selector)
+        )
 
     def _replies(
         self,

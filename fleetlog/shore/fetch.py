@@ -113,6 +113,47 @@ class _RateLimit:
 _T = TypeVar("_T")
 
 
+#: what a link is assumed to carry before one range has arrived (bytes/s): a slow radio
+_FLOOR_RATE = 16_000.0
+#: seconds of the link's measured rate kept in flight: enough to fill a fast link, few
+#: enough on a radio that the last range asked arrives well within its timeout
+_IN_FLIGHT_SECONDS = 4.0
+#: a range's timeout beyond the time the bytes ahead of it need at the measured rate
+_RANGE_SLACK = 15.0
+
+
+class _LinkRate:
+    """The rate ranges arrive at, so that a slow link gets fewer in flight and longer timeouts.
+
+    Ranges asked back to back arrive one after another at the link's pace: a 1 MiB range
+    takes 8 s at 1 Mbit/s, so eight asked at once with a fixed 10 s timeout time out on a
+    radio however healthy it is.
+    """
+
+    def __init__(self) -> None:
+        self.rate: float | None = None
+        self._last: float | None = None
+
+    def arrived(self, nbytes: int, busy_since: float) -> None:
+        now = time.monotonic()
+        start = busy_since if self._last is None else max(self._last, busy_since)
+        self._last = now
+        elapsed = now - start
+        if elapsed <= 0 or nbytes <= 0:
+            return
+        sample = nbytes / elapsed
+        self.rate = sample if self.rate is None else 0.7 * self.rate + 0.3 * sample
+
+    def idle(self) -> None:
+        self._last = None
+
+    def window_bytes(self) -> float:
+        return max(self.rate or 0.0, _FLOOR_RATE) * _IN_FLIGHT_SECONDS
+
+    def timeout(self, bytes_ahead: int, base: float) -> float:
+        return max(base, _RANGE_SLACK + bytes_ahead / max(self.rate or 0.0, _FLOOR_RATE))
+
+
 @dataclass
 class _Context:
     client: FleetClient
@@ -126,6 +167,7 @@ class _Context:
     cancel: threading.Event
     server: str | None = None
     received: int = 0
+    link: _LinkRate = field(default_factory=_LinkRate)
 
 
 def _riding_out(ctx: _Context, call: Callable[[], _T]) -> _T:
@@ -280,16 +322,33 @@ class _Transfer:
         cursor = start - overlap
         inflight: deque[PendingRange] = deque()
         end = target
+        link = ctx.link
+        link.idle()
+        asked_at = time.monotonic()
         while True:
             if ctx.cancel.is_set():
                 msg = "the fetch was interrupted; the same command resumes it"
                 raise QueryError(msg)
+            ahead = sum(p.length for p in inflight)
             while len(inflight) < ctx.window and cursor < end:
+                if len(inflight) >= 2 and ahead >= link.window_bytes():
+                    # As much in flight as the link carries in a few seconds, and never
+                    # fewer than two ranges: between one range's end and the next one's
+                    # first bytes the link would idle, and TCP restarts slowly after idling.
+                    break
                 length = min(ctx.chunk, end - cursor)
                 ctx.limit.wait(length)
+                ahead += length
+                timeout = link.timeout(ahead, ctx.client.timeout)
                 inflight.append(
                     ctx.client.request_range(
-                        ctx.vehicle, ctx.session, self.name, cursor, length, server=ctx.server
+                        ctx.vehicle,
+                        ctx.session,
+                        self.name,
+                        cursor,
+                        length,
+                        server=ctx.server,
+                        timeout=timeout,
                     )
                 )
                 cursor += length
@@ -309,6 +368,7 @@ class _Transfer:
                 if self._remote_size() < pending.offset:
                     raise _Restart from None  # the file shrank: rewritten on the vehicle
                 raise
+            link.arrived(len(data), asked_at)
             self.meta = meta
             if pending.offset + pending.length > meta.size:
                 end = min(end, meta.size)  # the file is shorter than the listing said

@@ -217,11 +217,25 @@ class ReplyItem:
     replier: str | None = None
 
 
+#: Zenoh priorities by what a query is for. Replies travel at their query's priority, so on
+#: a slow link a command's answer overtakes a fetch's ranges in Zenoh's queues.
+PRIORITIES: dict[str, zenoh.Priority] = {
+    "bulk": zenoh.Priority.DATA_LOW,
+    "normal": zenoh.Priority.DATA,
+    "command": zenoh.Priority.INTERACTIVE_HIGH,
+}
+
+
 class PendingQuery:
     """A query in flight; iterate it for its replies (it ends when the query does)."""
 
     def __init__(
-        self, session: zenoh.Session, selector: str, timeout: float, payload: bytes | None = None
+        self,
+        session: zenoh.Session,
+        selector: str,
+        timeout: float,
+        payload: bytes | None = None,
+        priority: str = "normal",
     ) -> None:
         self.selector = selector
         with translate_zerror(f"query {selector!r}"):
@@ -230,6 +244,7 @@ class PendingQuery:
                 consolidation=zenoh.ConsolidationMode.NONE,
                 timeout=timeout,
                 payload=payload,
+                priority=PRIORITIES[priority],
             )
 
     def __iter__(self) -> Iterator[ReplyItem]:
@@ -255,14 +270,21 @@ class PendingQuery:
 
 
 def start_query(
-    session: zenoh.Session, selector: str, *, timeout: float, payload: bytes | None = None
+    session: zenoh.Session,
+    selector: str,
+    *,
+    timeout: float,
+    payload: bytes | None = None,
+    priority: str = "normal",
 ) -> PendingQuery:
     """Send a query (with ``payload``, e.g. a control request) without waiting for replies.
+
+    ``priority``: ``bulk`` (file ranges, grep), ``normal``, or ``command`` (control, status).
 
     Raises:
         TransportError: the query could not be sent.
     """
-    return PendingQuery(session, selector, timeout, payload)
+    return PendingQuery(session, selector, timeout, payload, priority)
 
 
 def session_zid(session: zenoh.Session) -> str:

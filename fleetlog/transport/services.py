@@ -138,11 +138,13 @@ def get_replies(
     samples: list[zenoh.Sample] = []
     errors: list[str] = []
     with translate_zerror(f"query {selector!r}"):
+        # Status and control: ahead of any bulk transfer on the same link.
         replies = session.get(
             selector,
             timeout=timeout,
             payload=payload,
             consolidation=zenoh.ConsolidationMode.NONE,
+            priority=zenoh.Priority.INTERACTIVE_HIGH,
         )
         for reply in replies:
             sample = reply.ok

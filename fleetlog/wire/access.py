@@ -44,6 +44,7 @@ __all__ = [
     "Profile",
     "Role",
     "access_control",
+    "access_matrix",
     "common_name",
     "grants_of",
     "messages_of",
@@ -520,3 +521,21 @@ def access_control(profile: Profile) -> dict[str, Any]:
         "subjects": subjects,
         "policies": policies,
     }
+
+
+def access_matrix() -> str:
+    """The table as Markdown, for docs/deploy.md (a test keeps the two the same)."""
+    roles = (Role.VEHICLE, Role.OPERATOR, Role.REPLAY, Role.ROUTER)
+    head = "| key | vehicle (its own keys) | operator | replay host | router |"
+    lines = [head, "|---|---|---|---|---|"]
+    for rule in KEY_RULES:
+        cells = []
+        for role in roles:
+            actions = rule.grants[role]
+            if actions == ALL:
+                cells.append("all")
+            else:
+                names = [a.value for a in Action if a in actions]
+                cells.append(", ".join(names) if names else "—")
+        lines.append(f"| `{rule.wire}` | " + " | ".join(cells) + " |")
+    return "\n".join(lines)

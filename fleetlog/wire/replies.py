@@ -16,6 +16,7 @@ from typing import Any
 
 from fleetlog.errors import FormatError
 from fleetlog.wire.keys import check_component
+from fleetlog.wire.version import WIRE_VERSION, version_of
 
 __all__ = [
     "REPLY_TARGET",
@@ -246,14 +247,17 @@ def sessions_to_json(
     batch: list[dict[str, Any]] = []
     size = 0
     who = {"server": server, "recorder": recorder}
+    wire = {"wire": WIRE_VERSION}
     for info in sessions:
         obj = info.as_json()
         batch.append(obj)
         size += len(_dump(obj))
         if size >= REPLY_TARGET:
-            replies.append(_dump({"vehicle": vehicle, **who, "sessions": batch, "more": True}))
+            replies.append(
+                _dump({"vehicle": vehicle, **who, "sessions": batch, "more": True, **wire})
+            )
             batch, size = [], 0
-    replies.append(_dump({"vehicle": vehicle, **who, "sessions": batch, "more": False}))
+    replies.append(_dump({"vehicle": vehicle, **who, "sessions": batch, "more": False, **wire}))
     return replies
 
 
@@ -323,6 +327,7 @@ class LatestInfo:
     start: float | None = None
     server: str | None = None
     recorder: str | None = None
+    wire: int = WIRE_VERSION
 
     def to_json(self) -> bytes:
         """Return the reply bytes."""
@@ -336,6 +341,7 @@ class LatestInfo:
                 "start": self.start,
                 "server": self.server,
                 "recorder": self.recorder,
+                "wire": self.wire,
             }
         )
 
@@ -359,6 +365,7 @@ class LatestInfo:
             None if start is None else float(start),
             _opt(obj, "server", str, what),
             _opt(obj, "recorder", str, what),
+            version_of(obj),
         )
 
 

@@ -183,7 +183,8 @@ def test_cli_init_check_revoke(tmp_path: Path, cli_env: dict[str, str]) -> None:
     fleet = FleetKit(d).load()
     assert fleet.etc == "/etc/fleetlog"
     conf = (d / "vehicles/alpha/router.json5").read_text()
-    assert '"tls/shore.example.org:7447"' in conf
+    assert '"tls/shore.example.org:7447?prio=0-4#so_sndbuf=16384"' in conf
+    assert '"tls/shore.example.org:7447?prio=5-7"' in conf
     assert "/etc/fleetlog/router.pem" in conf
     assert fleet.vehicles["bravo"].dial() == "tls/10.0.0.7:7448"
     shore = read_certificate((d / "shore/router.pem").read_bytes())

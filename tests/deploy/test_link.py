@@ -1,0 +1,132 @@
+"""The vehicle-shore link cut, restored and degraded, in network namespaces the test creates.
+
+A vehicle (router, recorder, an app counting at 20 Hz) and the shore (router, commands) sit
+in two namespaces joined by a radio link (fleetlog.deploy.netlink): real kernel TCP on both
+ends, the fleet's real certificates and configurations. The link is cut and restored, then
+degraded as ``tc netem delay 200ms loss 5%`` and ``tbf rate 1mbit`` on the vehicle's side
+would (1 Mbit/s back): the vehicle records without a
+gap, the shore reconnects by itself, a fetch resumes across a cut and verifies, and a
+command's round trip stays under a second while the fetch fills the link.
+
+The short version runs in the normal suite (a cut the session outlives, a small fetch); the
+long one (slow: a cut longer than the lease, a fetch of several MB) with ``-m slow``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import os
+import re
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+from link_support import RTT_PROBE, LinkedFleet, python_cmd, round_trips
+
+from fleetlog.deploy.netlink import namespaces_possible
+
+WHY_NOT = namespaces_possible()
+
+
+@dataclass(frozen=True)
+class Profile:
+    cut: float  # seconds the link is cut in the first phase
+    big: int  # bytes of the session fetched over the degraded link
+    fill: float  # seconds command round trips are timed while the fetch fills the link
+
+
+SHORT = Profile(cut=6.0, big=1_200_000, fill=6.0)
+LONG = Profile(cut=20.0, big=4_000_000, fill=20.0)
+
+
+def counters(alog_root: Path) -> list[tuple[float, int]]:
+    """(time, value) of every COUNTER line the recorder wrote."""
+    out = []
+    for alog in alog_root.rglob("*.alog"):
+        for line in alog.read_text(errors="replace").splitlines():
+            m = re.match(r"^(\d+\.\d+)\s+COUNTER\s+\S+\s+(\d+)", line)
+            if m:
+                out.append((float(m.group(1)), int(m.group(2))))
+    return sorted(out, key=lambda tv: tv[1])
+
+
+@pytest.mark.parametrize(
+    "profile",
+    [pytest.param(SHORT, id="short"), pytest.param(LONG, id="long", marks=pytest.mark.slow)],
+)
+def test_cut_restore_degrade(tmp_path: Path, cli_env: dict[str, str], profile: Profile) -> None:
+    if WHY_NOT is not None:
+        pytest.skip(f"SKIPPED LOUDLY: no network namespaces here: {WHY_NOT}")
+    linked = LinkedFleet(tmp_path, cli_env, big=profile.big)
+    try:
+        linked.start_fleet()
+        assert linked.shore_sees_alpha(60) is not None, linked.output("router-alpha")
+
+        # -- cut and restore: the shore reconnects by itself
+        linked.link.cut()
+        time.sleep(profile.cut)
+        linked.link.restore()
+        back = linked.shore_sees_alpha(60)
+        assert back is not None, linked.output("router-alpha")
+
+        # -- degraded as netem and tbf on the vehicle's side would: 200 ms, 5 % loss,
+        # 1 Mbit/s from the vehicle; 1 Mbit/s back
+        linked.link.set("out", delay=0.2, loss=0.05, rate=1_000_000, queue=0.1)
+        linked.link.set("back", rate=1_000_000, queue=0.1)
+        probe = linked.spawn(linked.shore_ns, "shore", "probe", python_cmd(RTT_PROBE), tmp_path)
+        linked.wait_output("probe", "ready", timeout=60)
+        assert linked.big is not None
+        session, original = linked.big
+        out = tmp_path / "fetched"
+        fetch = linked.spawn(
+            linked.shore_ns, "shore", "fetch",
+            [*python_cmd("from fleetlog.cli import main; main()"), "fetch", "alpha", session,
+             "-o", str(out), "--retry-for", "120"],
+            tmp_path,
+        )  # fmt: skip
+        part = out / session / f"{original.name}.part"
+        deadline = time.monotonic() + 60
+        while not part.exists() and time.monotonic() < deadline:
+            time.sleep(0.1)  # the ranges are asked: the link fills from now on
+        assert part.exists(), linked.output("fetch")
+        filling = time.monotonic()
+        time.sleep(profile.fill)
+        assert fetch.poll() is None, "the fetch ended before the round trips were timed"
+        # a cut in the middle: the fetch carries on by itself once the link is back
+        cut_at = time.monotonic()
+        linked.link.cut()
+        time.sleep(5)
+        linked.link.restore()
+        assert fetch.wait(600) == 0, linked.output("fetch")
+        probe.terminate()
+        probe.wait(10)
+        fetched = out / session / original.name
+        assert (
+            hashlib.sha256(fetched.read_bytes()).digest()
+            == hashlib.sha256(original.read_bytes()).digest()
+        )
+        rtts = round_trips(linked.output("probe"), filling, cut_at - 1.0)
+        print(f"command round trips while the fetch fills the link (s): {rtts}")
+        assert len(rtts) >= 4, linked.output("probe")
+        assert None not in rtts, f"a command got no answer: {rtts}"
+        answered = sorted(r for r in rtts if r is not None)
+        # Each command rides the urgent link, ahead of the fetch's ranges: about one round
+        # trip. A lost packet of the command itself costs a TCP retransmission (~0.3-0.6 s),
+        # with or without a fetch (docs/deploy.md, "Slow links"), hence the tail allowance.
+        assert answered[len(answered) // 2] < 0.5, rtts
+        assert sum(r < 1.0 for r in answered) >= 0.8 * len(answered), rtts
+
+        # -- the recording: every counter value, no gap
+        linked.link.set(delay=0.0, loss=0.0, rate=0.0)
+        time.sleep(1.0)
+    finally:
+        linked.close()
+    values = counters(linked.logs)
+    assert len(values) > 100
+    numbers = [v for _, v in values]
+    assert numbers == list(range(numbers[0], numbers[0] + len(numbers))), "samples were lost"
+    gaps = [b[0] - a[0] for a, b in itertools.pairwise(values)]
+    assert max(gaps) < 0.5, f"the recording has a gap of {max(gaps):.2f} s"
+    assert os.path.exists(linked.logs)
