@@ -38,7 +38,7 @@ with Vehicle("alpha", source="iCounter") as v:
         time.sleep(0.05)
 """
 
-#: command round trips from the shore: a control query every 0.5 s, each printed as
+#: command round trips from the shore: a control query every 0.25 s, each printed as
 #: "SENT_AT ROUND_TRIP" (time.monotonic(), shared by every process of the machine)
 RTT_PROBE = """
 import json, sys, time
@@ -54,7 +54,7 @@ while True:
     except Exception:
         ok = False
     print(t, time.monotonic() - t if ok else "none", flush=True)
-    time.sleep(0.5)
+    time.sleep(0.25)
 """
 
 

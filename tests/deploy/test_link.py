@@ -37,7 +37,7 @@ class Profile:
     fill: float  # seconds command round trips are timed while the fetch fills the link
 
 
-SHORT = Profile(cut=6.0, big=1_200_000, fill=6.0)
+SHORT = Profile(cut=6.0, big=1_500_000, fill=8.0)
 LONG = Profile(cut=20.0, big=4_000_000, fill=20.0)
 
 
@@ -109,13 +109,13 @@ def test_cut_restore_degrade(tmp_path: Path, cli_env: dict[str, str], profile: P
         )
         rtts = round_trips(linked.output("probe"), filling, cut_at - 1.0)
         print(f"command round trips while the fetch fills the link (s): {rtts}")
-        assert len(rtts) >= 4, linked.output("probe")
+        assert len(rtts) >= 8, linked.output("probe")
         assert None not in rtts, f"a command got no answer: {rtts}"
         answered = sorted(r for r in rtts if r is not None)
         # Each command rides the urgent link, ahead of the fetch's ranges: about one round
         # trip. A lost packet of the command itself costs a TCP retransmission (~0.3-0.6 s),
         # with or without a fetch (docs/deploy.md, "Slow links"), hence the tail allowance.
-        assert answered[len(answered) // 2] < 0.5, rtts
+        assert answered[len(answered) // 2] < 0.6, rtts
         assert sum(r < 1.0 for r in answered) >= 0.8 * len(answered), rtts
 
         # -- the recording: every counter value, no gap
