@@ -29,12 +29,13 @@ ALLOWED: dict[str, set[str]] = {
     "shore": {"moos", "wire", "storage", "transport"},
     "replayer": {"moos", "wire", "storage", "transport", "shore"},
     "tools": {"moos", "wire", "storage"},
+    "export": {"moos", "wire", "storage", "tools"},
     "bridge": {"moos", "wire", "storage", "transport"},
     "api": {"moos", "wire", "transport"},
     "deploy": {"moos", "wire", "storage", "transport"},
     "cli": {
         *("moos", "wire", "storage", "transport"),
-        *("recorder", "query", "shore", "replayer", "tools", "api", "bridge", "deploy"),
+        *("recorder", "query", "shore", "replayer", "tools", "api", "bridge", "deploy", "export"),
     },
 }
 PURE_FORBIDDEN = {"socket", "zenoh", "typer", "threading", "subprocess", "shutil"}

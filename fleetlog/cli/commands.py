@@ -3,6 +3,7 @@
 from fleetlog.cli import (
     bridge,
     deploy,
+    export,
     fetch,
     fleet,
     poke,
@@ -20,6 +21,7 @@ from fleetlog.cli import (
 __all__ = [
     "bridge",
     "deploy",
+    "export",
     "fetch",
     "fleet",
     "poke",

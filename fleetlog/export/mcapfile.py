@@ -1,0 +1,346 @@
+"""An MCAP writer that takes messages in batches: indexed, zstd-compressed chunks.
+
+Written from the MCAP specification (format version 0): magic, a Header, then the data
+section (Schema and Channel records where first needed, then Chunk records each followed by
+its Message Index records), DataEnd, a summary section (Schemas, Channels, Statistics and
+Chunk Indexes, each group located by a Summary Offset record), a Footer with the summary's
+CRC, and the magic again. Readers (Foxglove, ``mcap`` CLI and libraries) seek with the
+summary and the message indexes.
+
+Why not the ``mcap`` package's writer: it builds every record in Python per message, about
+10 times slower than the read path it follows. Here a batch's messages are sorted by
+log time, packed with one precompiled :class:`struct.Struct` per message, cut into chunks
+of about :data:`CHUNK_SIZE` uncompressed bytes, and compressed by a worker thread
+(``zstandard`` releases the GIL) while the next chunk is packed. Chunks may overlap in
+time (several vehicles, late entries); the message indexes let readers merge them.
+"""
+
+from __future__ import annotations
+
+import struct
+import zlib
+from collections import deque
+from collections.abc import Sequence
+from concurrent.futures import Future, ThreadPoolExecutor
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, BinaryIO
+
+from fleetlog.errors import StorageError
+
+if TYPE_CHECKING:
+    import polars as pl
+
+__all__ = ["CHUNK_SIZE", "MAGIC", "McapWriter"]
+
+MAGIC = b"\x89MCAP0\r\n"
+#: Uncompressed bytes of messages per chunk (what a reader decompresses to reach one).
+CHUNK_SIZE = 1 << 20
+_IN_FLIGHT = 4
+
+_OP_HEADER = 0x01
+_OP_FOOTER = 0x02
+_OP_SCHEMA = 0x03
+_OP_CHANNEL = 0x04
+_OP_MESSAGE = 0x05
+_OP_CHUNK = 0x06
+_OP_MESSAGE_INDEX = 0x07
+_OP_CHUNK_INDEX = 0x08
+_OP_STATISTICS = 0x0B
+_OP_SUMMARY_OFFSET = 0x0E
+_OP_DATA_END = 0x0F
+
+_MESSAGE = struct.Struct("<BQHIQQ")  # opcode, length, channel, sequence, log and publish time
+_MESSAGE_FIXED = 22  # the message record's content before its data
+_PREFIX = struct.Struct("<BQ")  # a record's opcode and content length
+
+
+def _string(text: str) -> bytes:
+    data = text.encode()
+    return struct.pack("<I", len(data)) + data
+
+
+def _record(opcode: int, content: bytes) -> bytes:
+    return _PREFIX.pack(opcode, len(content)) + content
+
+
+def _string_map(items: dict[str, str]) -> bytes:
+    body = b"".join(_string(k) + _string(v) for k, v in sorted(items.items()))
+    return struct.pack("<I", len(body)) + body
+
+
+@dataclass
+class _ChunkInfo:
+    start: int
+    end: int
+    offset: int = 0
+    length: int = 0
+    index_offsets: dict[int, int] = field(default_factory=dict)
+    index_length: int = 0
+    compressed: int = 0
+    uncompressed: int = 0
+
+
+@dataclass
+class _Pending:
+    info: _ChunkInfo
+    crc: int
+    indexes: dict[int, bytes]
+    data: Future[bytes]
+
+
+class McapWriter:
+    """Writes one MCAP file to a binary stream; call :meth:`finish` to complete it.
+
+    Args:
+        out: the stream (written sequentially; its position is tracked here).
+        library: what wrote the file (the Header's ``library``).
+        chunk_size: uncompressed message bytes per chunk.
+        level: the zstd level (1: fast and ~5x smaller than JSON text).
+    """
+
+    def __init__(
+        self,
+        out: BinaryIO,
+        *,
+        library: str = "fleetlog",
+        chunk_size: int = CHUNK_SIZE,
+        level: int = 1,
+    ) -> None:
+        import zstandard
+
+        self._out = out
+        self._pos = 0
+        self._chunk_size = max(1024, chunk_size)
+        self._zstd = zstandard.ZstdCompressor(level=level)
+        self._pool = ThreadPoolExecutor(1, thread_name_prefix="fleetlog-mcap")
+        self._pending: deque[_Pending] = deque()
+        self._schemas: list[bytes] = []
+        self._channels: list[bytes] = []
+        self._chunks: list[_ChunkInfo] = []
+        self._counts: dict[int, int] = {}
+        self._sequence = 0
+        self._start: int | None = None
+        self._end = 0
+        self._finished = False
+        self._records = b""
+        self._write(MAGIC + _record(_OP_HEADER, _string("") + _string(library)))
+
+    def _write(self, data: bytes) -> None:
+        try:
+            self._out.write(data)
+        except OSError as err:
+            msg = f"cannot write the MCAP file: {err.strerror or err}"
+            raise StorageError(msg) from None
+        self._pos += len(data)
+
+    # -- schemas and channels
+
+    def add_schema(self, name: str, encoding: str, data: bytes) -> int:
+        """Declare a schema; return its id (from 1)."""
+        sid = len(self._schemas) + 1
+        content = struct.pack("<H", sid) + _string(name) + _string(encoding)
+        record = _record(_OP_SCHEMA, content + struct.pack("<I", len(data)) + data)
+        self._schemas.append(record)
+        self._write(record)
+        return sid
+
+    def add_channel(
+        self, topic: str, encoding: str, schema: int, metadata: dict[str, str] | None = None
+    ) -> int:
+        """Declare a channel; return its id (from 0). At most 65,535 channels.
+
+        Raises:
+            StorageError: the file has 65,535 channels already.
+        """
+        cid = len(self._channels)
+        if cid > 0xFFFF:
+            msg = f"an MCAP file holds at most 65,535 channels; {topic!r} is one too many"
+            raise StorageError(msg)
+        content = struct.pack("<HH", cid, schema) + _string(topic) + _string(encoding)
+        record = _record(_OP_CHANNEL, content + _string_map(metadata or {}))
+        self._channels.append(record)
+        self._write(record)
+        self._counts[cid] = 0
+        return cid
+
+    # -- messages
+
+    def write_batch(self, batch: pl.DataFrame) -> None:
+        """Write messages: columns ``channel`` (UInt16), ``log_time`` (UInt64 ns), ``data``.
+
+        ``data`` is Binary (or String, written as UTF-8). Publish time is the log time.
+        The batch is sorted by log time (stable) and cut into chunks. All the per-batch
+        work (sizes, chunk boundaries, message indexes) is done once by polars; only the
+        record headers are packed per message.
+        """
+        import polars as pl
+
+        if not batch.height:
+            return
+        frame = (
+            batch.select(
+                pl.col("channel").cast(pl.UInt16),
+                pl.col("log_time").cast(pl.UInt64),
+                pl.col("data").cast(pl.Binary),
+            )
+            .sort("log_time", maintain_order=True)
+            .with_columns(size=(pl.col("data").bin.size() + (_MESSAGE_FIXED + 9)).cast(pl.UInt64))
+            .with_columns(at=pl.col("size").cum_sum() - pl.col("size"))
+            .with_columns(part=(pl.col("at") // self._chunk_size).rle_id())
+            .with_columns(offset=pl.col("at") - pl.col("at").min().over("part"))
+        )
+        # Message indexes: per chunk and channel, (log time, offset) in time order.
+        ordered = frame.select("part", "channel", "log_time", "offset").sort(
+            "part", "channel", maintain_order=True
+        )
+        runs = ordered.group_by("part", "channel", maintain_order=True).len().rows()
+        flat = ordered.select(pl.concat_list("log_time", "offset").explode()).to_series().to_list()
+        sizes = frame.group_by("part", maintain_order=True).agg(
+            pl.len(), pl.col("log_time").min().alias("start"), pl.col("log_time").max()
+        )
+        channels = frame["channel"].to_list()
+        times = frame["log_time"].to_list()
+        datas = frame["data"].to_list()
+        row = 0
+        pair = 0
+        run = 0
+        for part, count, start, end in sizes.rows():
+            indexes: dict[int, bytes] = {}
+            while run < len(runs) and runs[run][0] == part:
+                _, cid, n = runs[run]
+                run += 1
+                indexes[cid] = _PREFIX.pack(_OP_MESSAGE_INDEX, 6 + 16 * n) + struct.pack(
+                    f"<HI{2 * n}Q", cid, 16 * n, *flat[2 * pair : 2 * (pair + n)]
+                )
+                pair += n
+                self._counts[cid] += n
+            self._chunk(
+                channels[row : row + count], times[row : row + count], datas[row : row + count]
+            )
+            self._queue(_ChunkInfo(start, end), indexes)
+            row += count
+
+    def _chunk(self, channels: list[int], times: list[int], datas: list[bytes]) -> None:
+        first = self._sequence
+        pack = _MESSAGE.pack
+        pieces: list[bytes] = []
+        append = pieces.append
+        for seq, (cid, t, data) in enumerate(zip(channels, times, datas, strict=True), first):
+            append(pack(_OP_MESSAGE, _MESSAGE_FIXED + len(data), cid, seq & 0xFFFFFFFF, t, t))
+            append(data)
+        self._sequence = first + len(datas)
+        self._records = b"".join(pieces)
+
+    def _queue(self, info: _ChunkInfo, indexes: dict[int, bytes]) -> None:
+        records, self._records = self._records, b""
+        self._start = info.start if self._start is None else min(self._start, info.start)
+        self._end = max(self._end, info.end)
+        info.uncompressed = len(records)
+        job = self._pool.submit(self._zstd.compress, records)
+        self._pending.append(_Pending(info, zlib.crc32(records), indexes, job))
+        while len(self._pending) > _IN_FLIGHT:
+            self._flush_one()
+
+    def _flush_one(self) -> None:
+        job = self._pending.popleft()
+        data = job.data.result()
+        info = job.info
+        content = (
+            struct.pack("<QQQI", info.start, info.end, info.uncompressed, job.crc)
+            + _string("zstd")
+            + struct.pack("<Q", len(data))
+        )
+        info.offset = self._pos
+        info.compressed = len(data)
+        self._write(_PREFIX.pack(_OP_CHUNK, len(content) + len(data)) + content)
+        self._write(data)
+        info.length = self._pos - info.offset
+        index_start = self._pos
+        for cid, record in job.indexes.items():
+            info.index_offsets[cid] = self._pos
+            self._write(record)
+        info.index_length = self._pos - index_start
+        self._chunks.append(info)
+
+    # -- the end
+
+    def finish(self) -> None:
+        """Write the remaining chunks, the summary and the footer."""
+        if self._finished:
+            return
+        try:
+            while self._pending:
+                self._flush_one()
+        finally:
+            self._pool.shutdown(wait=True)
+        self._finished = True
+        self._write(_record(_OP_DATA_END, struct.pack("<I", 0)))
+        summary_start = self._pos
+        groups: list[tuple[int, bytes]] = [
+            (_OP_SCHEMA, b"".join(self._schemas)),
+            (_OP_CHANNEL, b"".join(self._channels)),
+            (_OP_STATISTICS, self._statistics()),
+            (_OP_CHUNK_INDEX, b"".join(map(_chunk_index, self._chunks))),
+        ]
+        summary = bytearray()
+        offsets = bytearray()
+        for opcode, data in groups:
+            if data:
+                offsets += _record(
+                    _OP_SUMMARY_OFFSET,
+                    struct.pack("<BQQ", opcode, summary_start + len(summary), len(data)),
+                )
+                summary += data
+        offsets_start = summary_start + len(summary)
+        footer_head = _PREFIX.pack(_OP_FOOTER, 20) + struct.pack(
+            "<QQ", summary_start, offsets_start
+        )
+        crc = zlib.crc32(bytes(summary) + bytes(offsets) + footer_head)
+        self._write(bytes(summary) + bytes(offsets) + footer_head + struct.pack("<I", crc) + MAGIC)
+
+    def abort(self) -> None:
+        """Stop the compression thread without completing the file (an error upstream)."""
+        self._finished = True
+        self._pool.shutdown(wait=True, cancel_futures=True)
+
+    def _statistics(self) -> bytes:
+        counts = b"".join(struct.pack("<HQ", cid, n) for cid, n in sorted(self._counts.items()))
+        content = (
+            struct.pack(
+                "<QHIIIIQQ",
+                sum(self._counts.values()),
+                len(self._schemas),
+                len(self._channels),
+                0,
+                0,
+                len(self._chunks),
+                self._start or 0,
+                self._end,
+            )
+            + struct.pack("<I", len(counts))
+            + counts
+        )
+        return _record(_OP_STATISTICS, content)
+
+    @property
+    def messages(self) -> int:
+        """Messages written so far."""
+        return self._sequence
+
+
+def _chunk_index(info: _ChunkInfo) -> bytes:
+    offsets = b"".join(struct.pack("<HQ", c, o) for c, o in sorted(info.index_offsets.items()))
+    content = (
+        struct.pack("<QQQQ", info.start, info.end, info.offset, info.length)
+        + struct.pack("<I", len(offsets))
+        + offsets
+        + struct.pack("<Q", info.index_length)
+        + _string("zstd")
+        + struct.pack("<QQ", info.compressed, info.uncompressed)
+    )
+    return _record(_OP_CHUNK_INDEX, content)
+
+
+def batch_columns() -> Sequence[str]:
+    """The columns :meth:`McapWriter.write_batch` reads."""
+    return ("channel", "log_time", "data")

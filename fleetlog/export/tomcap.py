@@ -1,0 +1,219 @@
+"""MCAP that Foxglove opens as it is: a channel per ``/<vehicle>/<VAR>``, JSON messages.
+
+Each entry becomes one message on its variable's channel (``json`` encoding, schema
+``fleetlog.MoosValue``: ``{value, source, aux, community}``; a double's value is a JSON
+number, null for NaN and infinities, which JSON cannot hold; a binary's is its bytes in
+base64). ``log_time`` and ``publish_time`` are the entry's absolute time in nanoseconds,
+LOGSTART (exactly as the banner wrote it) plus the offset rounded to the nanosecond. The
+channel's metadata names the vehicle, variable and session(s). Positions get Foxglove's own
+channels (:mod:`fleetlog.export.foxglove`).
+
+Entries without an absolute time (a log with no usable banner) or with one before 1970
+cannot be MCAP messages: they are counted (:attr:`McapResult.untimed`), not written.
+The JSON text of a whole batch is built by polars expressions, never per message in Python.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from decimal import Decimal
+from typing import TYPE_CHECKING, BinaryIO
+
+from fleetlog import __version__
+from fleetlog.export.entries import Select, Tally, entry_frames
+from fleetlog.export.foxglove import (
+    LOCATION_FIX,
+    NAV_VARS,
+    POSE_IN_FRAME,
+    VALUE_SCHEMA,
+    locations,
+    poses,
+    schema_bytes,
+)
+from fleetlog.export.mcapfile import McapWriter
+from fleetlog.storage.columnar import Errors
+
+if TYPE_CHECKING:
+    import polars as pl
+
+    from fleetlog.export.sources import Source
+
+__all__ = ["McapResult", "export_mcap", "logstart_ns"]
+
+
+@dataclass
+class McapResult:
+    """What an MCAP export wrote.
+
+    Attributes:
+        messages: messages written (derived positions included).
+        channels: channels declared.
+        untimed: entries not written: no absolute time, or one before 1970.
+        derived: topics of the derived position channels.
+    """
+
+    messages: int = 0
+    channels: int = 0
+    untimed: int = 0
+    derived: list[str] = field(default_factory=list)
+
+
+def logstart_ns(logstart: float) -> int:
+    """LOGSTART in nanoseconds, exactly as its shortest decimal form reads."""
+    return int((Decimal(repr(logstart)) * 1_000_000_000).to_integral_value())
+
+
+def _json(frame: pl.DataFrame) -> pl.Expr:
+    """The message text of each row (``{value, source, aux, community}``)."""
+    import polars as pl
+
+    text = pl.struct(pl.col("string").alias("v")).struct.json_encode()
+    value = (
+        pl.when(pl.col("type") == "double")
+        .then(
+            pl.when(pl.col("double").is_finite())
+            .then(pl.col("double").cast(pl.String))
+            .otherwise(pl.lit("null"))
+        )
+        .when(pl.col("type") == "binary")
+        .then(
+            pl.when(pl.col("binary").is_not_null())
+            .then(pl.concat_str(pl.lit('"'), pl.col("binary").bin.encode("base64"), pl.lit('"')))
+            .otherwise(pl.lit("null"))
+        )
+        .otherwise(text.str.slice(5).str.head(-1))
+    )
+    rest = pl.struct("source", "aux", "community").struct.json_encode().str.slice(1)
+    return pl.concat_str(pl.lit('{"value":'), value, pl.lit(","), rest)
+
+
+class _Channels:
+    """The channel of each (vehicle, variable), declared on first use."""
+
+    def __init__(self, writer: McapWriter) -> None:
+        self.writer = writer
+        self.value_schema = writer.add_schema(
+            "fleetlog.MoosValue", "jsonschema", schema_bytes(VALUE_SCHEMA)
+        )
+        self.ids: dict[str, dict[str, int]] = {}
+
+    def of(self, vehicle: str, session: str, variables: list[str]) -> dict[str, int]:
+        known = self.ids.setdefault(vehicle, {})
+        for name in variables:
+            if name not in known:
+                known[name] = self.writer.add_channel(
+                    f"/{vehicle}/{name}",
+                    "json",
+                    self.value_schema,
+                    {"vehicle": vehicle, "variable": name, "session": session},
+                )
+        return known
+
+
+def export_mcap(
+    sources: Sequence[Source],
+    out: BinaryIO,
+    tally: Tally,
+    *,
+    errors: Errors = "skip",
+    selection: Select = None,
+    positions: bool = True,
+) -> McapResult:
+    """Write the sources' entries as one MCAP file.
+
+    Args:
+        sources: the logs (several vehicles, several sessions each).
+        out: the file.
+        tally: counts what reading met.
+        errors: the reader's error policy.
+        selection: keep only these variables, sources and times.
+        positions: add ``foxglove.LocationFix``/``PoseInFrame`` channels where possible.
+
+    Raises:
+        StorageError: a log cannot be read or the file written.
+        FormatError: (``errors="raise"``) a log is corrupt.
+    """
+    import polars as pl
+
+    result = McapResult()
+    writer = McapWriter(out, library=f"fleetlog {__version__}")
+    channels = _Channels(writer)
+    nav: dict[str, list[pl.DataFrame]] = {}
+    try:
+        for source in sources:
+            if source.logstart is None:
+                # Read it anyway: the tally counts its entries as untimed, and its warnings.
+                for frame in entry_frames(source, tally, errors=errors, selection=selection):
+                    result.untimed += frame.height
+                continue
+            base = logstart_ns(source.logstart)
+            for frame in entry_frames(source, tally, errors=errors, selection=selection):
+                timed = frame.with_columns(
+                    log_time=(pl.col("offset") * 1e9).round().cast(pl.Int64, strict=False) + base
+                ).filter(pl.col("log_time").is_not_null() & (pl.col("log_time") >= 0))
+                result.untimed += frame.height - timed.height
+                ids = channels.of(
+                    source.vehicle, source.session, timed["variable"].unique().sort().to_list()
+                )
+                names = list(ids)
+                batch = timed.select(
+                    pl.col("variable")
+                    .replace_strict(names, [ids[n] for n in names], return_dtype=pl.UInt16)
+                    .alias("channel"),
+                    "log_time",
+                    _json(timed).alias("data"),
+                )
+                writer.write_batch(batch)
+                if positions:
+                    wanted = timed.filter(
+                        pl.col("variable").is_in(list(NAV_VARS)) & (pl.col("type") == "double")
+                    )
+                    if wanted.height:
+                        nav.setdefault(source.vehicle, []).append(
+                            wanted.select("log_time", "variable", "double")
+                        )
+        if positions:
+            _derived(writer, channels, nav, result)
+        result.channels = sum(len(v) for v in channels.ids.values()) + len(result.derived)
+        writer.finish()
+        result.messages = writer.messages
+    except BaseException:
+        writer.abort()
+        raise
+    return result
+
+
+def _derived(
+    writer: McapWriter,
+    channels: _Channels,
+    nav: dict[str, list[pl.DataFrame]],
+    result: McapResult,
+) -> None:
+    import polars as pl
+
+    schemas: dict[str, int] = {}
+    for vehicle, parts in nav.items():
+        rows = pl.concat(parts).with_columns(pl.col("log_time").cast(pl.UInt64))
+        for kind, schema, frame in (
+            ("location", LOCATION_FIX, locations(rows, vehicle)),
+            ("pose", POSE_IN_FRAME, poses(rows)),
+        ):
+            if not frame.height:
+                continue
+            name = str(schema["title"])
+            if name not in schemas:
+                schemas[name] = writer.add_schema(name, "jsonschema", schema_bytes(schema))
+            topic = f"/{vehicle}/{kind}"
+            if kind in channels.ids.get(vehicle, {}):
+                topic += "_fleetlog"  # a variable of that very name exists: keep both
+            cid = writer.add_channel(topic, "json", schemas[name], {"vehicle": vehicle})
+            result.derived.append(topic)
+            writer.write_batch(frame.select(pl.lit(cid).alias("channel"), "log_time", "data"))
+
+
+def default_name(sources: Sequence[Source]) -> str:
+    """A file name for an export of these sources (``<session>`` or ``fleet``)."""
+    names = {s.session for s in sources}
+    return os.fspath(next(iter(names))) if len(names) == 1 else "fleet"
