@@ -724,8 +724,11 @@ class AlogReader:
             raise StorageError(msg)
         try:
             with blog.open("rb") as file:
+                # Never ask read() for more than the file holds: it allocates what it is asked
+                # for, and a forged Bytes=10**12 would be a MemoryError, not an error message.
+                end = os.fstat(file.fileno()).st_size
                 file.seek(ref.offset)
-                data = file.read(ref.size + 1)
+                data = file.read(max(0, min(ref.size + 1, end - ref.offset)))
         except (OSError, OverflowError) as err:
             why = err.strerror if isinstance(err, OSError) and err.strerror else err
             msg = f"{where}: cannot read {blog} at Offset={ref.offset}: {why}"
