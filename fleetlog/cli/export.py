@@ -102,9 +102,14 @@ def _selection(
     return select
 
 
+def _say(text: str) -> None:
+    # soft_wrap: a path or a sentence stays on one line whatever the terminal's width
+    err_console().print(text, soft_wrap=True, highlight=False, markup=False)
+
+
 def _report(tally: Tally) -> None:
     for line in tally.warnings():
-        err_console().print(f"fleetlog: warning: {line}")
+        _say(f"fleetlog: warning: {line}")
 
 
 def _size(path: Path) -> str:
@@ -197,6 +202,9 @@ def export(
     if output.is_dir():
         msg = f"{output} is a directory; name a file, or give --format dataset"
         raise UsageError(msg)
+    if output.exists() and not force:
+        msg = f"{output} exists; give --force to overwrite it"
+        raise UsageError(msg)
     resolved = resolve(list(sources_in))
     _pending(resolved)
     select = _selection(variables, sources, start, end)
@@ -230,12 +238,12 @@ def export(
             )
             untimed = result.untimed
     _report(tally)
-    err_console().print(
+    _say(
         f"exported {tally.entries:,} entries of {len(resolved.sources)} log(s) to {output}"
         f" ({_size(output)}, {time.monotonic() - began:.1f} s)"
     )
     if untimed:
-        err_console().print(
+        _say(
             f"fleetlog: {untimed:,} entries have no absolute time (no usable banner, or before"
             " 1970) and are not in the MCAP file"
         )
@@ -245,27 +253,24 @@ def export(
 
 def _pending(resolved: Resolved) -> None:
     for path in resolved.pending:
-        err_console().print(
-            f"fleetlog: warning: {path}: its alog is still being fetched (.part); not exported"
-        )
+        _say(f"fleetlog: warning: {path}: its alog is still being fetched (.part); not exported")
 
 
 def _dataset(resolved: Resolved, output: Path, errors: Errors) -> None:
     began = time.monotonic()
-    console = err_console()
 
     def starting(vehicle: str, session: str) -> None:
-        console.print(f"{vehicle}/{session} ...")
+        _say(f"{vehicle}/{session} ...")
 
     result = export_dataset(resolved, output, errors=errors, on_session=starting)
     _report(result.tally)
     _pending(resolved)
     for vehicle, session in result.changed:
-        console.print(
+        _say(
             f"fleetlog: warning: {vehicle}/{session} changed since it was exported; it is not"
             f" rewritten (remove its directory from {output} to export it again)"
         )
-    console.print(
+    _say(
         f"dataset {output}: {len(result.written)} session(s) added"
         f" ({sum(n for _, _, n in result.written):,} entries), {len(result.kept)} already"
         f" there, in {time.monotonic() - began:.1f} s"
@@ -357,7 +362,7 @@ def plot(
         )
     _report(tally)
     for name in result.missing:
-        err_console().print(f"fleetlog: warning: {name} has no double values; not plotted")
-    err_console().print(f"plotted {sum(result.points.values()):,} points to {output}")
+        _say(f"fleetlog: warning: {name} has no double values; not plotted")
+    _say(f"plotted {sum(result.points.values()):,} points to {output}")
     if result.missing:
         raise typer.Exit(1)

@@ -34,6 +34,7 @@ if TYPE_CHECKING:
 __all__ = ["FORMATS", "PlotResult", "plot", "plot_format"]
 
 FORMATS = {".png": "png", ".svg": "svg", ".pdf": "pdf"}
+_FEW = 50
 _MISSING = "plots need matplotlib, an optional extra: pip install 'fleetlog[plot]'"
 
 
@@ -180,6 +181,7 @@ def _over_time(
                     mine["double"].to_list(),
                     color=colour[vehicle],
                     linewidth=1.0,
+                    marker="." if mine.height < _FEW else None,  # a lone sample still shows
                     label=vehicle,
                 )
         ax.set_ylabel(name)

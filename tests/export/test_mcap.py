@@ -1,0 +1,190 @@
+"""MCAP exports re-read by the ``mcap`` package's reader: Foxglove's view of the alog."""
+
+from __future__ import annotations
+
+import base64
+import io
+import json
+import math
+from pathlib import Path
+
+import polars as pl
+import pytest
+from export.support import IVP, REFERENCE_ALOGS, THEMOOS, expected, same_double
+from mcap.reader import make_reader
+
+from fleetlog.export import Tally, export_mcap, resolve
+from fleetlog.export.mcapfile import McapWriter
+from fleetlog.storage.outputs import atomic_output
+
+
+def export(sources: list[Path], out: Path, **options: object) -> tuple[Tally, object]:
+    tally = Tally()
+    with atomic_output(out) as f:
+        result = export_mcap(resolve(sources).sources, f, tally, **options)  # type: ignore[arg-type]
+    return tally, result
+
+
+def messages(path: Path) -> list[tuple[str, str, str, int, int, dict[str, object]]]:
+    out = []
+    with path.open("rb") as f:
+        reader = make_reader(f, validate_crcs=True)
+        for schema, channel, message in reader.iter_messages(log_time_order=True):
+            assert schema is not None
+            out.append(
+                (
+                    channel.topic,
+                    schema.name,
+                    channel.message_encoding,
+                    message.log_time,
+                    message.publish_time,
+                    json.loads(message.data),
+                )
+            )
+    return out
+
+
+@pytest.mark.parametrize("alog", REFERENCE_ALOGS, ids=lambda p: p.parent.name)
+def test_mcap_round_trip_through_the_mcap_reader(alog: Path, tmp_path: Path) -> None:
+    out = tmp_path / "x.mcap"
+    tally, _ = export([alog], out, positions=False)
+    want = expected(alog)
+    vehicle = resolve([alog]).sources[0].vehicle
+    got = messages(out)
+    assert tally.entries == len(want) == len(got)
+    ref = sorted(want, key=lambda w: (w.time_ns, w.variable, str(w.double), str(w.string)))
+    mine = sorted(
+        got, key=lambda m: (m[3], m[0].rsplit("/", 1)[1], str(m[5]["value"]), str(m[5]["value"]))
+    )
+    # same multiset of (time, variable): compare per time and variable in a stable way
+    assert [(m[3], m[0]) for m in sorted(got, key=lambda m: (m[3], m[0]))] == sorted(
+        (w.time_ns, f"/{vehicle}/{w.variable}") for w in want
+    )
+    by_key: dict[tuple[int, str], list[dict[str, object]]] = {}
+    for topic, schema, encoding, log_time, publish_time, data in mine:
+        assert schema == "fleetlog.MoosValue"
+        assert encoding == "json"
+        assert publish_time == log_time
+        by_key.setdefault((log_time, topic), []).append(data)
+    for w in ref:
+        assert w.time_ns is not None
+        candidates = by_key[(w.time_ns, f"/{vehicle}/{w.variable}")]
+        match = None
+        for data in candidates:
+            value = data["value"]
+            if w.type == "double":
+                ok = (
+                    value is None and not math.isfinite(w.double)  # type: ignore[arg-type]
+                ) or (isinstance(value, float | int) and same_double(float(value), w.double))
+            elif w.type == "binary":
+                ok = value == (None if w.binary is None else base64.b64encode(w.binary).decode())
+            else:
+                ok = value == w.string
+            if ok and (data["source"], data["aux"], data["community"]) == (
+                w.source,
+                w.aux,
+                w.community,
+            ):
+                match = data
+                break
+        assert match is not None, (w, candidates)
+        candidates.remove(match)
+
+
+def test_the_file_is_indexed_and_chunked_with_zstd(tmp_path: Path) -> None:
+    out = tmp_path / "x.mcap"
+    export([IVP], out)
+    with out.open("rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    assert summary.statistics is not None
+    assert summary.chunk_indexes
+    assert all(c.compression == "zstd" for c in summary.chunk_indexes)
+    assert all(c.message_index_offsets for c in summary.chunk_indexes)
+    assert summary.statistics.message_count == sum(
+        summary.statistics.channel_message_counts.values()
+    )
+    topics = {c.topic for c in summary.channels.values()}
+    assert "/alpha/NAV_X" in topics
+    assert "/alpha/pose" in topics
+    assert "/alpha/location" in topics
+    value = next(s for s in summary.schemas.values() if s.name == "fleetlog.MoosValue")
+    assert value.encoding == "jsonschema"
+    assert set(json.loads(value.data)["properties"]) == {"value", "source", "aux", "community"}
+
+
+def test_positions_for_foxglove_map_and_3d_panels(tmp_path: Path) -> None:
+    out = tmp_path / "x.mcap"
+    _, _result = export([IVP], out)
+    got = messages(out)
+    poses = [m for m in got if m[0] == "/alpha/pose"]
+    fixes = [m for m in got if m[0] == "/alpha/location"]
+    assert {m[1] for m in poses} == {"foxglove.PoseInFrame"}
+    assert {m[1] for m in fixes} == {"foxglove.LocationFix"}
+    # NAV_X, NAV_Y, NAV_HEADING first together at 1.35116; then NAV_Z, then NAV_X again
+    assert len(poses) == 3
+    first = poses[0][5]
+    assert first["frame_id"] == "map"
+    assert first["pose"]["position"] == {"x": 0.0, "y": -20.0, "z": 0.0}  # type: ignore[index]
+    q = first["pose"]["orientation"]  # type: ignore[index]
+    # heading 180 (south, compass) is yaw -90 degrees about +z from east
+    assert math.isclose(q["z"], -math.sqrt(0.5))
+    assert math.isclose(q["w"], math.sqrt(0.5))
+    stamp = first["timestamp"]
+    assert stamp["sec"] * 10**9 + stamp["nsec"] == poses[0][3]  # type: ignore[index]
+    assert poses[2][5]["pose"]["position"]["x"] == 0.52211  # type: ignore[index]
+    assert len(fixes) == 1
+    fix = fixes[0][5]
+    assert (fix["latitude"], fix["longitude"]) == (43.82512, -70.3304)
+    assert fix["frame_id"] == "alpha"
+
+
+def test_several_vehicles_one_channel_each_per_variable(tmp_path: Path) -> None:
+    out = tmp_path / "x.mcap"
+    export([IVP, THEMOOS], out)
+    with out.open("rb") as f:
+        summary = make_reader(f).get_summary()
+    assert summary is not None
+    topics = [c.topic for c in summary.channels.values()]
+    assert len(topics) == len(set(topics))
+    assert "/alpha/NAV_X" in topics
+    assert f"/{THEMOOS.name}/NAV_X" in topics
+
+
+def test_writer_orders_by_time_within_a_batch_and_cuts_chunks(tmp_path: Path) -> None:
+    buf = io.BytesIO()
+    writer = McapWriter(buf, chunk_size=1024)
+    sid = writer.add_schema("s", "jsonschema", b"{}")
+    a = writer.add_channel("/a", "json", sid)
+    b = writer.add_channel("/b", "json", sid)
+    n = 500
+    times = [(n - i) * 1000 for i in range(n)]  # reversed
+    writer.write_batch(
+        pl.DataFrame(
+            {
+                "channel": [a if i % 3 else b for i in range(n)],
+                "log_time": times,
+                "data": [f'{{"i":{i}}}'.encode() for i in range(n)],
+            }
+        )
+    )
+    writer.finish()
+    buf.seek(0)
+    reader = make_reader(buf, validate_crcs=True)
+    summary = reader.get_summary()
+    assert summary is not None
+    assert len(summary.chunk_indexes) > 5
+    got = [(m.log_time, c.topic) for _, c, m in reader.iter_messages()]
+    assert [t for t, _ in got] == sorted(times)
+    assert summary.statistics is not None
+    assert summary.statistics.channel_message_counts == {a: n - (n + 2) // 3, b: (n + 2) // 3}
+
+
+def test_a_log_without_logstart_is_counted_not_written(tmp_path: Path) -> None:
+    alog = tmp_path / "x.alog"
+    alog.write_bytes(b"0.5             NAV_X                pNav            1.0 \n")
+    out = tmp_path / "x.mcap"
+    tally, result = export([alog], out)
+    assert result.untimed == 1  # type: ignore[attr-defined]
+    assert tally.no_logstart == [str(alog)]
+    assert messages(out) == []
