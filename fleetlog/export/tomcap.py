@@ -15,7 +15,6 @@ The JSON text of a whole batch is built by polars expressions, never per message
 
 from __future__ import annotations
 
-import os
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from decimal import Decimal
@@ -211,9 +210,3 @@ def _derived(
             cid = writer.add_channel(topic, "json", schemas[name], {"vehicle": vehicle})
             result.derived.append(topic)
             writer.write_batch(frame.select(pl.lit(cid).alias("channel"), "log_time", "data"))
-
-
-def default_name(sources: Sequence[Source]) -> str:
-    """A file name for an export of these sources (``<session>`` or ``fleet``)."""
-    names = {s.session for s in sources}
-    return os.fspath(next(iter(names))) if len(names) == 1 else "fleet"
