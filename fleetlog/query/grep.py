@@ -59,6 +59,26 @@ class EntryFilter(Selection):
         super().__init__(request.variables, request.sources, low, high)
 
 
+_ENCODE = json.JSONEncoder(separators=(",", ":")).encode
+
+
+def _json_strings(values: list[str]) -> list[str]:
+    """Encode strings as JSON (ASCII) in one call of the C encoder, one text per value.
+
+    Inside an encoded string every ``"`` is escaped, so ``","`` only ever separates items.
+    """
+    if not values:
+        return []
+    return _ENCODE(values)[2:-2].split('","')
+
+
+def _json_numbers(values: list[float] | list[int]) -> list[str]:
+    """Encode numbers as JSON in one call (no number's text holds a comma)."""
+    if not values:
+        return []
+    return _ENCODE(values)[1:-1].split(",")
+
+
 def _record_lines(batch: Batch) -> list[bytes]:
     """Encode a batch of matches as grep record lines (what encode_grep_line writes)."""
     if not batch.exact:
@@ -68,13 +88,15 @@ def _record_lines(batch: Batch) -> list[bytes]:
             for e, kind in zip(batch.entries(), kinds, strict=True)
         ]
     frame = batch.frame
-    columns = [
-        frame[name].to_list() for name in ("offset", "var", "source", "type", "text", "line")
-    ]
-    dump = json.JSONEncoder(separators=(",", ":")).encode
+    offsets = _json_numbers(frame["offset"].to_list())
+    keys = _json_strings(frame["var"].to_list())
+    sources = _json_strings(frame["source"].to_list())
+    texts = _json_strings(frame["text"].to_list())
+    lines = _json_numbers(frame["line"].to_list())
+    kinds = [_KIND[kind] for kind in frame["type"].to_list()]
     return [
-        dump([offset, key, source, _KIND[kind], text, line]).encode("ascii") + b"\n"
-        for offset, key, source, kind, text, line in zip(*columns, strict=True)
+        f'[{o},"{k}","{s}","{t}","{x}",{n}]\n'.encode("ascii")
+        for o, k, s, t, x, n in zip(offsets, keys, sources, kinds, texts, lines, strict=True)
     ]
 
 
