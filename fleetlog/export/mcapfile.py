@@ -7,8 +7,9 @@ Chunk Indexes, each group located by a Summary Offset record), a Footer with the
 CRC, and the magic again. Readers (Foxglove, ``mcap`` CLI and libraries) seek with the
 summary and the message indexes.
 
-Why not the ``mcap`` package's writer: it builds every record in Python per message, about
-10 times slower than the read path it follows. Here a batch's messages are sorted by
+Why not the ``mcap`` package's writer: it builds every record in Python per message; fed
+ready-made messages it alone took 2.8 times as long as reading them (docs/bench.md §10), more
+than this whole export. Here a batch's messages are sorted by
 log time, their headers packed by one precompiled :class:`struct.Struct` mapped over the
 batch (a loop in C, not in Python bytecode), cut into chunks
 of about :data:`CHUNK_SIZE` uncompressed bytes, and compressed by a worker thread
