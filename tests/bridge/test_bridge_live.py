@@ -467,3 +467,48 @@ def test_a_real_plogger_logs_what_zenoh_posts(
         ("FROM_ZENOH_S", "uPokeDB", "from"),
     ]
     assert bridge.stop() == 0
+
+
+def test_replay_into_live_drives_the_moos_community(
+    moosdbs: Callable[..., MoosDB],
+    umms: Callable[..., Umm],
+    procs: Callable[..., Proc],
+    router: Router,
+    tmp_path: Path,
+) -> None:
+    """replay --into-live -> bridge -> MOOSDB -> umm: every value, in order, under its
+    original source; the live recorder logs each replayed value once (nothing comes back)."""
+    from fleetlog.moos.alog import LineFormatter, format_banner
+
+    db = moosdbs("alpha")
+    logs = tmp_path / "logs"
+    logs.mkdir()
+    rec = procs("record", "--vehicle", "alpha", "--no-serve", *zargs(router), cwd=logs)
+    rec.wait_for("recording vehicle")
+    bridge = start_bridge(procs, db, router)
+    watch = umms(db, "watch", "-s=NAV_X,DEPLOY")
+    wait_until(watch.connected, what="umm to connect")
+
+    fmt = LineFormatter()
+    start = 1_700_000_000.0
+    lines = [format_banner("./old/old.alog", start, "Tue Nov 14 22:13:20 2023")]
+    for i in range(100):
+        lines.append(fmt.double(0.5 + i * 0.01, "NAV_X", "pNav", float(i)))
+    lines.append(fmt.string(1.6, "DEPLOY", "pHelmIvP", "true"))
+    old = tmp_path / "old.alog"
+    old.write_text("".join(lines))
+
+    replay = procs("replay", str(old), "--as", "alpha", "--into-live", "--rate", "4",
+                   *zargs(router))  # fmt: skip
+    assert replay.wait(60) == 0, replay.stderr
+    wait_until(lambda: len(watch.received()) >= 101, what="every replayed value in umm")
+    rows = watch.received()
+    assert [float(r[3]) for r in rows if r[0] == "NAV_X"] == [float(i) for i in range(100)]
+    assert {r[1] for r in rows if r[0] == "NAV_X"} == {"pNav"}
+    assert [(r[1], r[3].strip()) for r in rows if r[0] == "DEPLOY"] == [("pHelmIvP", "true")]
+    time.sleep(1.0)
+    assert bridge.stop() == 0
+    assert rec.stop() == 0
+    logged = [e for e in iter_entries(alog_of(logs).read_text().splitlines(keepends=True))]
+    assert [e.value for e in logged if e.key == "NAV_X"] == [float(i) for i in range(100)]
+    assert len([e for e in logged if e.key == "DEPLOY"]) == 1
