@@ -112,6 +112,8 @@ class BridgeService:
         self._zenoh_down_since: float | None = None
         self._zenoh_ever_up = False
         self._unforwarded_zenoh_at_loss = 0
+        #: what the bridge last said while the MOOSDB is away (repeated when Zenoh links)
+        self._waiting = ""
 
     # ---------------------------------------------------------------------------------------
     # Control
@@ -171,6 +173,9 @@ class BridgeService:
         self._client = client
         for pattern in ("*",) if "*" in cfg.to_zenoh else cfg.to_zenoh:
             client.subscribe_wildcard(pattern)
+        if self.vehicle is not None:
+            # Known already: Zenoh hears at once that the bridge waits for its MOOSDB.
+            self._start_zenoh(self.vehicle)
         keeper = asyncio.create_task(
             client.maintain(self._moos_up, self._moos_down, self._moos_retry, self.options.retry)
         )
@@ -200,7 +205,7 @@ class BridgeService:
         where = f"{client.host}:{client.port}"
         if self.forwarder is None:
             try:
-                self._start_zenoh(welcome)
+                self._start_zenoh(welcome.community or DEFAULT_COMMUNITY)
             except FleetlogError as err:
                 self._fail(err)
                 return
@@ -209,6 +214,7 @@ class BridgeService:
         forwarder.moos_connected()
         self._moos_ever_up = True
         self._retry_said = -1e300
+        self._waiting = ""
         if self._moos_down_since is None:
             forwarder.say(f"connected to the MOOSDB at {where} (community {welcome.community})")
         else:
@@ -246,11 +252,12 @@ class BridgeService:
         if not self._moos_ever_up and not self.options.wait_first:
             self._fail(error)
             return
+        where = f"{client.host}:{client.port}" if client else "?"
+        self._waiting = f"waiting for the MOOSDB at {where}: {reason}"
         now = time.monotonic()
         if now - self._retry_said >= RETRY_REPORT_INTERVAL:
             self._retry_said = now
-            where = f"{client.host}:{client.port}" if client else "?"
-            self.say(f"waiting for the MOOSDB at {where}: {reason}")
+            self.say(self._waiting)
 
     def _mail(self, messages: list[Message]) -> None:
         forwarder = self.forwarder
@@ -268,9 +275,12 @@ class BridgeService:
     # ---------------------------------------------------------------------------------------
     # The Zenoh side
 
-    def _start_zenoh(self, welcome: Welcome) -> None:
-        """Set up publishing and subscribing once the vehicle is known."""
-        vehicle = self.vehicle or welcome.community or DEFAULT_COMMUNITY
+    def _start_zenoh(self, vehicle: str) -> None:
+        """Set up publishing and subscribing once the vehicle is known.
+
+        Raises:
+            TransportError: a declaration failed.
+        """
         self.vehicle = vehicle
         opts = self.options
         publisher = ExactPublisher(self._session, opts.root, vehicle, opts.name)
@@ -335,6 +345,8 @@ class BridgeService:
             return
         since = self._zenoh_down_since
         self._zenoh_down_since = None
+        if self._waiting and not forwarder.moos_up:
+            forwarder.own("MOOS_DEBUG", self._waiting)  # Zenoh could not hear it before
         if not self._zenoh_ever_up:
             self._zenoh_ever_up = True
             if stats.unforwarded_to_zenoh:

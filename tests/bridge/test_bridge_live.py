@@ -309,15 +309,23 @@ def test_the_moosdb_not_up_restarting_and_back(
     cli_env: dict[str, str],
 ) -> None:
     db = moosdbs("alpha", start=False)
+    debug = watches("fleet/alpha/var/MOOS_DEBUG")
     bridge = procs(
         "bridge", "--host", "127.0.0.1", "--port", str(db.port), "-v", "alpha", *zargs(router)
     )
     bridge.wait_for("waiting for the MOOSDB")
+
+    def said(text: str) -> bool:
+        return any(text.encode() in s[1] for s in debug.of("fleet/alpha/var/MOOS_DEBUG"))
+
+    # the vehicle is known: the fleet hears it on MOOS_DEBUG, from the bridge
+    wait_until(lambda: said("waiting for the MOOSDB"), what="MOOS_DEBUG on Zenoh")
     db.start()
     bridge.wait_for("connected to the MOOSDB")
     zwatch = watches("fleet/alpha/var/AFTER")
     db.stop()
     bridge.wait_for("lost the MOOSDB")
+    wait_until(lambda: said("lost the MOOSDB"), what="the loss on Zenoh")
     poke(router, "alpha", "DURING=1", env=cli_env)  # nowhere to post it: counted
     db.start()
     line = bridge.wait_for("reconnected to the MOOSDB")
