@@ -63,7 +63,7 @@ LAT_KEY = f"fleet/{VEHICLE}/var/BENCH_L"
 
 def role_moospub(args: argparse.Namespace) -> None:
     """Post N doubles into the MOOSDB as fast as our asyncio client can."""
-    from fleetlog.moos.protocol import notify
+    from fleetlog.moos.requests import notify
     from fleetlog.transport.moos_client import MoosClient
 
     async def main() -> None:

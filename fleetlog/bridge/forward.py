@@ -23,19 +23,17 @@ the MOOSDB. Its rules:
 
 from __future__ import annotations
 
-import collections
-import struct
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+from fleetlog.bridge.echo import EchoFilter
 from fleetlog.errors import FleetlogError
 from fleetlog.moos.patterns import MoosGlob
 from fleetlog.moos.protocol import DataType, Message
 
-__all__ = ["BridgeStats", "EchoFilter", "Forwarder"]
+__all__ = ["BridgeStats", "Forwarder"]
 
 _TYPE_NAMES = {DataType.DOUBLE: "double", DataType.STRING: "string", DataType.BINARY: "binary"}
-_F64 = struct.Struct("<d")
 #: names whose per-variable state is kept (types, last forwarded); beyond, it starts over
 MAX_NAMES = 65536
 
@@ -74,6 +72,8 @@ class BridgeStats:
     unconfirmed: int = 0
     #: packets from the MOOSDB skipped for being larger than the limit
     oversized: int = 0
+    #: samples from Zenoh lost to an unexpected error in the receiving thread (a bug)
+    rx_errors: int = 0
     #: successful connections to the MOOSDB, and losses of every Zenoh link
     moos_connections: int = 0
     zenoh_losses: int = 0
@@ -81,91 +81,6 @@ class BridgeStats:
     def as_dict(self) -> dict[str, int]:
         """Return the counters as a dict."""
         return dict(self.__dict__)
-
-
-def _digest(message: Message) -> object:
-    # The value's identity: exact bits of a double (NaN and -0.0 included), else the bytes'
-    # length and keyed hash (Python's SipHash, randomized per process).
-    if message.data_type == DataType.DOUBLE:
-        return _F64.pack(message.double)
-    return (len(message.string), hash(message.string))
-
-
-class EchoFilter:
-    """Remembers the bridge's recent posts to recognise the MOOSDB's echoes of them.
-
-    Args:
-        ttl: seconds a post waits for its echo; after that it is counted as unconfirmed.
-        capacity: the most posts remembered at once (the oldest are then forgotten and
-            counted as unconfirmed).
-    """
-
-    def __init__(self, ttl: float = 10.0, capacity: int = 1 << 20) -> None:
-        self.ttl = ttl
-        self.capacity = capacity
-        self._pending: dict[tuple[str, float], list[tuple[str, str, object]]] = {}
-        self._order: collections.deque[tuple[float, tuple[str, float], tuple[str, str, object]]]
-        self._order = collections.deque()
-        self.size = 0
-
-    def __bool__(self) -> bool:
-        return self.size > 0
-
-    def expect(self, message: Message, now: float) -> int:
-        """Remember a post; return how many old posts had to be forgotten to make room."""
-        head = (message.key, message.time)
-        tail = (message.source, message.data_type, _digest(message))
-        self._pending.setdefault(head, []).append(tail)
-        self._order.append((now + self.ttl, head, tail))
-        self.size += 1
-        forgotten = 0
-        while self.size > self.capacity:
-            forgotten += self._pop_oldest()
-        return forgotten
-
-    def take(self, message: Message) -> bool:
-        """Return True (and forget it) if ``message`` is the echo of a remembered post."""
-        tails = self._pending.get((message.key, message.time))
-        if tails is None:
-            return False
-        tail = (message.source, message.data_type, _digest(message))
-        try:
-            tails.remove(tail)
-        except ValueError:
-            return False
-        if not tails:
-            del self._pending[(message.key, message.time)]
-        self.size -= 1
-        return True
-
-    def _pop_oldest(self) -> int:
-        _, head, tail = self._order.popleft()
-        tails = self._pending.get(head)
-        if tails is None or tail not in tails:
-            return 0  # already echoed
-        tails.remove(tail)
-        if not tails:
-            del self._pending[head]
-        self.size -= 1
-        return 1
-
-    def expire(self, now: float) -> int:
-        """Forget posts whose echo is overdue; return how many."""
-        expired = 0
-        order = self._order
-        while order and order[0][0] <= now:
-            expired += self._pop_oldest()
-        if not self._pending:
-            order.clear()
-        return expired
-
-    def clear(self) -> int:
-        """Forget every post (the connection is gone); return how many were waiting."""
-        waiting = self.size
-        self._pending.clear()
-        self._order.clear()
-        self.size = 0
-        return waiting
 
 
 class _Selection:

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import queue
 import threading
 import time
 from collections.abc import Callable
@@ -24,10 +23,13 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from fleetlog.bridge.forward import BridgeStats, Forwarder
+from fleetlog.bridge.intake import Intake
+from fleetlog.bridge.status import status_text
 from fleetlog.errors import FleetlogError, TransportError
 from fleetlog.moos.bridge_config import BRIDGE_APP, DEFAULT_COMMUNITY, BridgeConfig
 from fleetlog.moos.patterns import glob_to_chunk, reduce_chunks
-from fleetlog.moos.protocol import DEFAULT_MAX_PACKET, MESSAGE_OVERHEAD, Message, Welcome
+from fleetlog.moos.protocol import DEFAULT_MAX_PACKET, MESSAGE_OVERHEAD, Message
+from fleetlog.moos.requests import Welcome
 from fleetlog.storage.procinfo import ProcessMonitor
 from fleetlog.transport.bridging import (
     ExactPublisher,
@@ -94,14 +96,13 @@ class BridgeService:
         self.ready = threading.Event()
         self._loop: asyncio.AbstractEventLoop | None = None
         self._stop: asyncio.Event | None = None
-        self._stop_requested = False
         self._client: MoosClient | None = None
         self._session: Any = None
         self._publisher: ExactPublisher | None = None
         self._rx: RemoteSubscriber | None = None
         self._links: LinkWatch | None = None
-        self._handoff: queue.Queue[list[tuple[Message | None, bool]]] = queue.Queue(maxsize=64)
-        self._wake_pending = False
+        #: set once the bridge stops: the receiving thread stops waiting for room
+        self._stopping = threading.Event()
         self._fatal: FleetlogError | None = None
         self._monitor = ProcessMonitor()
         self._started = time.time()
@@ -120,7 +121,7 @@ class BridgeService:
 
     def stop(self) -> None:
         """Ask the bridge to finish (safe from a signal handler or another thread)."""
-        self._stop_requested = True
+        self._stopping.set()
         loop, stop = self._loop, self._stop
         if loop is not None and stop is not None:
             with contextlib.suppress(RuntimeError):
@@ -160,7 +161,7 @@ class BridgeService:
     async def _main(self) -> None:
         self._loop = asyncio.get_running_loop()
         self._stop = asyncio.Event()
-        if self._stop_requested:
+        if self._stopping.is_set():
             return
         cfg = self.config
         client = MoosClient(
@@ -183,6 +184,7 @@ class BridgeService:
         try:
             await self._stop.wait()
         finally:
+            self._stopping.set()
             client.close()
             for task in (keeper, ticker):
                 task.cancel()
@@ -268,6 +270,9 @@ class BridgeService:
         client = self._client
         return client is not None and client.send(messages)
 
+    def _writable(self) -> threading.Event | None:
+        return self._client.writable if self._client is not None else None
+
     def _subscribe(self, name: str) -> None:
         if self._client is not None:
             self._client.subscribe(name)
@@ -318,10 +323,11 @@ class BridgeService:
             names: dict[str, str | None] = {}
             source = opts.name
 
+            intake = Intake(loop, forwarder.from_zenoh, self._writable, self._stopping)
+
             def samples(batch: list[Any]) -> None:
                 now = time.time()
-                items = [sample_to_message(s, prefix, names, now, source) for s in batch]
-                self._hand_over(items)
+                intake.put([sample_to_message(s, prefix, names, now, source) for s in batch])
 
             self._rx = RemoteSubscriber(self._session, prefix + chunk, samples)
 
@@ -362,37 +368,6 @@ class BridgeService:
             "be forwarded meanwhile"
         )
 
-    def _hand_over(self, items: list[tuple[Message | None, bool]]) -> None:
-        """Called in the receiving thread: wait for room, then wake the loop."""
-        client = self._client
-        while not self._stop_requested:
-            if client is None or client.writable.wait(0.5):
-                break
-        while not self._stop_requested:
-            try:
-                self._handoff.put(items, timeout=0.5)
-                break
-            except queue.Full:
-                continue
-        if not self._wake_pending:
-            self._wake_pending = True
-            loop = self._loop
-            if loop is not None:
-                with contextlib.suppress(RuntimeError):
-                    loop.call_soon_threadsafe(self._drain_zenoh)
-
-    def _drain_zenoh(self) -> None:
-        self._wake_pending = False
-        forwarder = self.forwarder
-        handoff = self._handoff
-        while True:
-            try:
-                items = handoff.get_nowait()
-            except queue.Empty:
-                return
-            if forwarder is not None:
-                forwarder.from_zenoh(items)
-
     def _close_zenoh(self) -> None:
         if self._rx is not None:
             self._rx.close()
@@ -421,6 +396,10 @@ class BridgeService:
             forwarder.tick()
             if self._client is not None:
                 forwarder.stats.oversized = self._client.oversized_packets
+            rx = self._rx
+            if rx is not None and rx.errors != forwarder.stats.rx_errors:
+                forwarder.stats.rx_errors = rx.errors
+                forwarder.say(f"{rx.errors} samples from Zenoh lost to an error: {rx.last_error}")
             if time.monotonic() >= next_status:
                 next_status += STATUS_INTERVAL
                 forwarder.own(self.options.name.upper() + "_STATUS", self.status_text())
@@ -428,20 +407,13 @@ class BridgeService:
     def status_text(self) -> str:
         """The bridge's ``<NAME>_STATUS``: CMOOSApp's fields, then its counters."""
         forwarder = self.forwarder
-        stats = self.stats
-        published = sorted(forwarder.published) if forwarder is not None else []
         client = self._client
-        subscribing = sorted(s.var for s in client.subscriptions) if client else []
-        error = stats.unforwarded_to_moos or stats.unforwarded_to_zenoh or stats.unconfirmed
-        counters = ",".join(f"{_camel(name)}={value}" for name, value in stats.as_dict().items())
-        return (
-            f"AppErrorFlag={'true' if error else 'false'},"
-            f"Uptime={time.time() - self._started:.6g},{self._monitor.fields()},"
-            f"MOOSName={self.options.name},Community={self.vehicle},"
-            f'Publishing="{"".join(n + "," for n in published)}",'
-            f'Subscribing="{"".join(n + "," for n in subscribing)}",{counters}'
+        return status_text(
+            name=self.options.name,
+            vehicle=self.vehicle,
+            uptime=time.time() - self._started,
+            process=self._monitor.fields(),
+            published=forwarder.published if forwarder is not None else (),
+            subscribing=[s.var for s in client.subscriptions] if client else (),
+            stats=self.stats,
         )
-
-
-def _camel(name: str) -> str:
-    return "".join(part.capitalize() for part in name.split("_"))

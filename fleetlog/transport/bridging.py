@@ -192,6 +192,9 @@ class RemoteSubscriber:
                 allowed_origin=zenoh.Locality.REMOTE,
             )
         self._on_samples = on_samples
+        #: samples lost to an unexpected error while handing them over, and the last one
+        self.errors = 0
+        self.last_error = ""
         self._thread = threading.Thread(target=self._run, name="fleetlog-bridge-rx", daemon=True)
         self._thread.start()
 
@@ -213,7 +216,11 @@ class RemoteSubscriber:
                     batch.append(more)
             except zenoh.ZError:
                 pass
-            on_samples(batch)
+            try:
+                on_samples(batch)
+            except Exception as err:  # the receiving thread must outlive any one batch
+                self.errors += len(batch)
+                self.last_error = f"{type(err).__name__}: {err}"
 
     def close(self, timeout: float = 5.0) -> None:
         """Undeclare the subscriber and wait for the thread to hand over what it holds."""

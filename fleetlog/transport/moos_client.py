@@ -23,14 +23,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 from fleetlog.errors import FormatError, TransportError
-from fleetlog.moos.protocol import (
-    DEFAULT_MAX_PACKET,
+from fleetlog.moos.protocol import DEFAULT_MAX_PACKET, Message, MsgType, PacketReader, encode_packet
+from fleetlog.moos.requests import (
     HANDSHAKE,
-    Message,
-    MsgType,
-    PacketReader,
     Welcome,
-    encode_packet,
     handshake_message,
     parse_welcome,
     register,

@@ -386,7 +386,7 @@ def test_values_keep_every_bit_into_the_alog(
     """-nan keeps its sign, a string its bytes, a message its source, aux and MOOS time."""
     import asyncio
 
-    from fleetlog.moos.protocol import notify
+    from fleetlog.moos.requests import notify
     from fleetlog.transport.moos_client import MoosClient
 
     db = moosdbs("alpha")

@@ -6,9 +6,11 @@ import math
 
 import pytest
 
-from fleetlog.bridge.forward import EchoFilter, Forwarder
+from fleetlog.bridge.echo import EchoFilter
+from fleetlog.bridge.forward import Forwarder
 from fleetlog.errors import TransportError
-from fleetlog.moos.protocol import Message, notify
+from fleetlog.moos.protocol import Message
+from fleetlog.moos.requests import notify
 
 
 class Rig:

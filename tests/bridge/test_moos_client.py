@@ -12,7 +12,8 @@ import pytest
 from moos_support import MoosDB, needs_moos
 
 from fleetlog.errors import TransportError
-from fleetlog.moos.protocol import Message, notify
+from fleetlog.moos.protocol import Message
+from fleetlog.moos.requests import notify
 from fleetlog.transport.moos_client import MoosClient, MoosRefusedError
 
 pytestmark = needs_moos

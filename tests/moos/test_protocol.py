@@ -11,7 +11,6 @@ from helpers import REFERENCE
 
 from fleetlog.errors import FormatError
 from fleetlog.moos.protocol import (
-    HANDSHAKE,
     MESSAGE_OVERHEAD,
     PACKET_HEADER,
     DataType,
@@ -23,6 +22,9 @@ from fleetlog.moos.protocol import (
     decode_stream,
     encode_message,
     encode_packet,
+)
+from fleetlog.moos.requests import (
+    HANDSHAKE,
     handshake_message,
     notify,
     parse_welcome,
