@@ -1,7 +1,7 @@
 """``fleetlog bridge`` against a C++ MOOS client on the same real MOOSDB, in one run.
 
 Needs ``MOOS_BIN``: the folder holding ``MOOSDB`` and ``umm`` built by hand from core-moos
-(docs/bench.md §9 says which programs and how they were built). Everything runs on loopback.
+(docs/bench.md §11 says which programs and how they were built). Everything runs on loopback.
 
 Each round, in this order:
 
