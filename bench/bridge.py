@@ -16,7 +16,9 @@ Each round, in this order:
 3. **Latency at 1,000 msg/s.** ``umm -p=BENCH_L@1000`` (C++) publishes; a C++ ``umm``
    receiver and the bridge → Zenoh subscriber receive the same messages at the same time.
    Latency = receive time − the message's MOOS time. Added p99 = bridge − C++.
-4. **Into the recorder.** The same N-message burst, bridge → ``fleetlog record``; every value
+4. **Zenoh → MOOS.** fleetlog's Python API publishes N doubles (BLOCK); the bridge posts them
+   into the MOOSDB, where fleetlog's asyncio MOOS client counts them in order.
+5. **Into the recorder.** The same N-message burst, bridge → ``fleetlog record``; every value
    must be in the alog once (loss-free at the recorder's own rate, which paces the bridge
    through BLOCK back-pressure).
 
@@ -86,6 +88,39 @@ def role_moospub(args: argparse.Namespace) -> None:
         while client.buffered():
             await asyncio.sleep(0.001)
         _emit(event="done", first=first, last=time.time())
+        await asyncio.to_thread(_wait_for, sys.stdin, "exit")
+        client.close()
+
+    asyncio.run(main())
+
+
+def role_moosrx(args: argparse.Namespace) -> None:
+    """Count N BENCH_Z notifications from the MOOSDB (fleetlog's asyncio client)."""
+    from fleetlog.transport.moos_client import MoosClient
+
+    async def main() -> None:
+        done = asyncio.Event()
+        state = {"count": 0, "first": 0.0, "last": 0.0, "in_order": True}
+
+        def mail(messages: list[Any]) -> None:
+            for m in messages:
+                if m.key != "BENCH_Z":
+                    continue
+                if state["count"] == 0:
+                    state["first"] = time.time()
+                if m.double != state["count"]:
+                    state["in_order"] = False
+                state["count"] += 1
+                if state["count"] >= args.n:
+                    state["last"] = time.time()
+                    done.set()
+
+        client = MoosClient(args.name, "127.0.0.1", args.port, on_mail=mail)
+        client.subscribe("BENCH_Z")
+        await client.connect()
+        _emit(event="ready")
+        await done.wait()
+        _emit(event="done", **state)
         await asyncio.to_thread(_wait_for, sys.stdin, "exit")
         client.close()
 
@@ -357,6 +392,29 @@ def latency(moos: Moos, seconds: float) -> dict[str, list[float]]:
     }
 
 
+def zenoh_to_moos(moos: Moos, n: int) -> dict[str, float]:
+    """fleetlog's Python API publishes N doubles; the bridge posts them into the MOOSDB."""
+    from fleetlog.api import Vehicle
+    from fleetlog.transport.session import SessionOptions
+
+    port = free_port()
+    rx = Helper("moosrx", ["--port", str(moos.port), "-n", str(n), "--name", "rx_z"], HERE)
+    rx.read()
+    opts = SessionOptions(listen=(f"tcp/127.0.0.1:{port}",), multicast_scouting=False)
+    with Vehicle(VEHICLE, source="bench", options=opts) as v:
+        bridge = Bridge(moos, "-e", f"tcp/127.0.0.1:{port}")
+        assert v.wait_for_subscriber("BENCH_Z", 10.0)
+        first = time.time()
+        for i in range(n):
+            v.publish("BENCH_Z", float(i))
+        got = rx.read(timeout=300)
+        rx.finish()
+        bridge.stop()
+    assert got["count"] == n, got
+    assert got["in_order"], got
+    return {"rate": n / (got["last"] - first)}
+
+
 def into_recorder(moos: Moos, n: int, work: Path) -> dict[str, float]:
     from benchlib import RecorderProcess, count_alog
 
@@ -401,6 +459,7 @@ def main() -> None:
         "cpp50": [], "cpp99": [], "br50": [], "br99": [], "added": [], "added50": []
     }  # fmt: skip
     rec_rates: list[float] = []
+    z2m_rates: list[float] = []
     meter = CpuMeter()
     print(f"load average at start: {loadavg()}", flush=True)
     for r in range(args.rounds):
@@ -410,6 +469,7 @@ def main() -> None:
                 cpp = rate_cpp(moos, args.n)
                 br = rate_bridge(moos, args.n)
                 lt = latency(moos, args.lat_seconds)
+                z2m = zenoh_to_moos(moos, args.n)
                 rec = None if args.no_recorder else into_recorder(moos, args.n, Path(tmp))
             finally:
                 moos.close()
@@ -437,6 +497,8 @@ def main() -> None:
             + f" | load {loadavg()}",
             flush=True,
         )  # fmt: skip
+        z2m_rates.append(z2m["rate"])
+        print(f"round {r + 1}: Zenoh -> MOOS {z2m['rate']:,.0f}/s, loss-free", flush=True)
         if rec:
             rec_rates.append(rec["rate"])
     busy, steal = meter.shares()
@@ -452,13 +514,14 @@ def main() -> None:
     print(f"1 kHz p99 C++ / bridge      {spread(lat['cpp99'], ms)} / {spread(lat['br99'], ms)} ms")
     print(f"added, same message p50     {spread(lat['added50'], ms)} ms (bridge rx - C++ rx)")
     print(f"added, same message p99     {spread(lat['added'], ms)} ms")
+    print(f"API -> bridge -> MOOSDB     {spread(z2m_rates)} msg/s, loss-free")
     if rec_rates:
         print(f"bridge -> recorder          {spread(rec_rates)} msg/s, loss-free")
     print(f"median C++ rate {statistics.median(cpp_rates):,.0f}")
 
 
 if __name__ == "__main__":
-    if len(sys.argv) > 1 and sys.argv[1] in ("moospub", "zcount", "zstamps"):
+    if len(sys.argv) > 1 and sys.argv[1] in ("moospub", "moosrx", "zcount", "zstamps"):
         role = sys.argv[1]
         p = argparse.ArgumentParser()
         p.add_argument("--port", type=int)
@@ -467,6 +530,8 @@ if __name__ == "__main__":
         p.add_argument("--name", default="tx")
         p.add_argument("--var", default="BENCH_X")
         ns = p.parse_args(sys.argv[2:])
-        {"moospub": role_moospub, "zcount": role_zcount, "zstamps": role_zstamps}[role](ns)
+        roles = {"moospub": role_moospub, "moosrx": role_moosrx, "zcount": role_zcount}
+        roles["zstamps"] = role_zstamps
+        roles[role](ns)
     else:
         main()

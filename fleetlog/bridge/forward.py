@@ -233,7 +233,8 @@ class Forwarder:
             if not self.moos_up:
                 stats.unforwarded_to_moos += 1
                 continue
-            if message.size() > self.max_post:
+            # size() encodes four texts: only a large value can come near the limit
+            if len(message.string) + 4096 > self.max_post and message.size() > self.max_post:
                 stats.too_large += 1
                 continue
             if known is None:

@@ -38,6 +38,7 @@ from fleetlog.wire.message import (
 
 __all__ = ["ExactPublisher", "LinkWatch", "RemoteSubscriber", "sample_to_message"]
 
+_new_message = Message.__new__
 _KIND_OF_TYPE = {DataType.DOUBLE: Kind.DOUBLE, DataType.STRING: Kind.STRING}
 _DOUBLE_ENCODING = zenoh.Encoding(ENCODINGS[Kind.DOUBLE])
 _STRING_ENCODING = zenoh.Encoding(ENCODINGS[Kind.STRING])
@@ -154,7 +155,9 @@ def sample_to_message(
             garbled = True
     if when is None or not math.isfinite(when):
         when = zenoh_time(sample) or now
-    message = Message("N", dtype, name, when, double, string, src or source, aux, community)
+    message = _new_message(
+        Message, "N", dtype, name, when, double, string, src or source, aux, community, -1.0, -1
+    )
     return message, garbled
 
 
