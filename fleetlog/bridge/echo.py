@@ -36,7 +36,7 @@ class EchoFilter:
             counted as unconfirmed).
     """
 
-    def __init__(self, ttl: float = 10.0, capacity: int = 1 << 20) -> None:
+    def __init__(self, ttl: float = 10.0, capacity: int = 1 << 18) -> None:
         self.ttl = ttl
         self.capacity = capacity
         self._pending: dict[tuple[str, float], list[tuple[str, str, object]]] = {}

@@ -36,6 +36,8 @@ __all__ = ["BridgeStats", "Forwarder"]
 _TYPE_NAMES = {DataType.DOUBLE: "double", DataType.STRING: "string", DataType.BINARY: "binary"}
 #: names whose per-variable state is kept (types, last forwarded); beyond, it starts over
 MAX_NAMES = 65536
+#: plain registrations the bridge makes for variables it posts outside ``ToZenoh``
+MAX_REGISTERED = 4096
 
 
 @dataclass
@@ -146,6 +148,7 @@ class Forwarder:
         self._to = _Selection(to_zenoh)
         self._from = _Selection(from_zenoh)
         self._registered: set[str] = set()
+        self._registered_full = False
         self._clashes_said: set[str] = set()
         #: set by the service: whether Zenoh has a link and the MOOSDB a connection
         self.zenoh_up = True
@@ -241,9 +244,18 @@ class Forwarder:
                 self._learn(name, message.data_type)
             if not self._to.everything and name not in self._registered:
                 # Outside a wildcard registration: register, so the DB's echo of this post
-                # (and the variable's type) reaches the bridge.
-                self._registered.add(name)
-                self._subscribe(name)
+                # (and the variable's type) reaches the bridge. A flood of new names from a
+                # peer must not grow the registrations without end: past the limit a post
+                # goes unregistered (no echo comes back; it is counted as unconfirmed).
+                if len(self._registered) < MAX_REGISTERED:
+                    self._registered.add(name)
+                    self._subscribe(name)
+                elif not self._registered_full:
+                    self._registered_full = True
+                    self.say(
+                        f"more than {MAX_REGISTERED} variables posted from Zenoh outside "
+                        "ToZenoh: later ones are posted without registering for them"
+                    )
             stats.unconfirmed += self.echo.expect(message, now)
             out.append(message)
         if out:
@@ -318,4 +330,4 @@ class Forwarder:
         self.moos_up = True
         self.stats.moos_connections += 1
         self._types.clear()
-        self._registered.clear()
+        # the client renews its registrations itself: ``_registered`` stays as it is

@@ -235,3 +235,16 @@ def test_zero_and_negative_zero_are_different_values(value: float) -> None:
     other = notify("Z", flipped, 1.0, "a", community="alpha")
     rig.fw.from_moos([other])
     assert rig.fw.stats.echoes == 0
+
+
+def test_a_flood_of_new_names_does_not_grow_the_registrations(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    import fleetlog.bridge.forward as forward
+
+    monkeypatch.setattr(forward, "MAX_REGISTERED", 3)
+    rig = Rig(to=("NAV_*",))
+    rig.fw.from_zenoh([(notify(f"V{i}", 1.0, 1.0, "a"), False) for i in range(10)])
+    assert rig.subscribed == ["V0", "V1", "V2"]
+    assert len([m for m in rig.posted if m.key.startswith("V")]) == 10
+    assert len([t for t in rig.said if "later ones are posted without registering" in t]) == 1
