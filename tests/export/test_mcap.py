@@ -6,6 +6,7 @@ import base64
 import io
 import json
 import math
+import random
 from pathlib import Path
 
 import polars as pl
@@ -188,3 +189,37 @@ def test_a_log_without_logstart_is_counted_not_written(tmp_path: Path) -> None:
     assert result.untimed == 1  # type: ignore[attr-defined]
     assert tally.no_logstart == [str(alog)]
     assert messages(out) == []
+
+
+def test_numpy_and_pure_python_assembly_write_the_same_bytes() -> None:
+    # numpy is an optional accelerator: without it, the pure-Python path must give the same file
+    rng = random.Random(3)
+    n = 5000
+    frame = pl.DataFrame(
+        {
+            "channel": [rng.randint(0, 5) for _ in range(n)],
+            "log_time": [rng.randint(0, 10**12) for _ in range(n)],
+            "data": [f'{{"v":{rng.random()!r},"s":"é\\n"}}' for _ in range(n)],
+        }
+    )
+    files = []
+    for accelerate in (False, True):
+        buf = io.BytesIO()
+        writer = McapWriter(buf, chunk_size=4096, accelerate=accelerate)
+        sid = writer.add_schema("s", "jsonschema", b"{}")
+        for i in range(6):
+            writer.add_channel(f"/c{i}", "json", sid)
+        writer.write_batch(frame)
+        writer.write_batch(frame.head(7))
+        # bytes that are not UTF-8 text take the pure-Python path in either writer
+        writer.write_batch(
+            pl.DataFrame(
+                {"channel": [1], "log_time": [5], "data": [b"\xff\xfe"]},
+                schema={"channel": pl.UInt16, "log_time": pl.UInt64, "data": pl.Binary},
+            )
+        )
+        writer.finish()
+        files.append(buf.getvalue())
+    assert files[0] == files[1]
+    reader = make_reader(io.BytesIO(files[1]), validate_crcs=True)
+    assert sum(1 for _ in reader.iter_messages()) == n + 7 + 1
