@@ -176,7 +176,7 @@ def export(
     ] = False,
     strict: Strict = False,
 ) -> None:
-    r"""Export logs to Parquet, MCAP (Foxglove), CSV, or a fleet dataset of Parquet.
+    """Export logs to Parquet, MCAP (Foxglove), CSV, or a fleet dataset of Parquet.
 
     \b
     fleetlog export SESSION -o mission.parquet      one row per entry
@@ -184,7 +184,7 @@ def export(
     fleetlog export SESSION -v NAV_X -o navx.csv    one variable
     fleetlog export SESSION --table -o sync.csv     a row per second, a column per variable
     fleetlog export ARCHIVE -o DATASET/             adds the sessions not exported yet
-    """
+    """  # noqa: D301 - click's \b (keep the lines as they are) must be the real character
     kind = _format(output, fmt)
     errors: Errors = "raise" if strict else "skip"
     if kind == "dataset":
