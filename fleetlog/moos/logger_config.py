@@ -190,6 +190,9 @@ class LoggerConfig:
         copy_file_dirs: fleetlog's own block parameter ``CopyFileDirs = dir1, dir2`` (may
             repeat): extra directories COPY_FILE_REQUEST may read from.
         moos_time_warp: the file-scope ``MOOSTimeWarp`` (default 1.0).
+        fsync_interval: fleetlog's own block parameter ``FsyncInterval = seconds`` (default
+            1): how often the open session's files are synced to the disk (``0``: only when
+            the session closes).
     """
 
     app_name: str = "pLogger"
@@ -217,6 +220,7 @@ class LoggerConfig:
     variant: VariantName = "ivp"
     copy_file_dirs: tuple[str, ...] = ()
     moos_time_warp: float = 1.0
+    fsync_interval: float = 1.0
 
     @classmethod
     def default(cls, app_name: str = "pLogger") -> LoggerConfig:
@@ -351,6 +355,17 @@ def _compress_mode(reader: _Reader) -> CompressMode:
     return "none"
 
 
+def _fsync_interval(reader: _Reader) -> float:
+    param = reader.param("FsyncInterval")
+    if param is None:
+        return 1.0
+    value = param.value.strip()
+    if not _FLOAT_RE.fullmatch(value) or not math.isfinite(float(value)) or float(value) < 0:
+        msg = f"{param.name} value {param.value!r} is not a number of seconds (0 or more)"
+        raise MissionError(msg, reader.path, param.lineno)
+    return float(value)
+
+
 def _variant(reader: _Reader) -> VariantName:
     param = reader.param("LogFormat")
     if param is None:
@@ -455,4 +470,5 @@ def logger_config(mission: Mission, app_name: str = "pLogger") -> LoggerConfig:
         variant=_variant(reader),
         copy_file_dirs=tuple(copy_dirs),
         moos_time_warp=_time_warp(mission),
+        fsync_interval=_fsync_interval(reader),
     )

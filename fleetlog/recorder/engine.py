@@ -28,6 +28,7 @@ from fleetlog.moos.naming import copy_file_name
 from fleetlog.moos.patterns import Verdict, WildcardClassifier, name_to_chunk
 from fleetlog.moos.slog import SlogTable, SlotPatch
 from fleetlog.moos.ylog import format_ylog_line
+from fleetlog.recorder.clocksync import clock_state
 from fleetlog.recorder.control import (
     MAX_COPIES,
     MAX_COPY_BYTES,
@@ -37,6 +38,7 @@ from fleetlog.recorder.control import (
     clip,
     quote,
 )
+from fleetlog.recorder.losses import LossLedger, reason_of
 from fleetlog.storage.metafile import boot_id, host_name, mark_cut_sessions
 from fleetlog.storage.procinfo import ProcessMonitor
 from fleetlog.storage.session import SessionLayout, SessionWriter
@@ -59,6 +61,14 @@ _SYSTEM_VARS = ("MOOS_DEBUG", "MOOS_SYSTEM")
 
 #: the session metadata is rewritten at most this often while counters change
 META_INTERVAL = 2.0
+#: losses that did not break the session (DROP publishers', unreadable keys) are marked in
+#: the alog at most this often
+GAP_INTERVAL = 1.0
+#: with no session open, opening one is retried after this long (doubling up to the maximum)
+RETRY_FIRST = 1.0
+RETRY_MAX = 8.0
+#: a file system with less free space than this is not worth a retry yet
+MIN_FREE_BYTES = 1 << 20
 #: notes one session may hold
 MAX_NOTES = 64
 
@@ -224,6 +234,24 @@ class Recorder:
         self._proc = ProcessMonitor()
         self._published: set[str] = set()
         self._subscribed: set[str] = set()
+        #: losses not yet marked in a log (docs/compat.md, PLOGGER_GAP)
+        self.losses = LossLedger()
+        self._gaps_at = 0.0
+        #: why no session is open after a failure (None while writing works)
+        self.broken: str | None = None
+        self._retry_at = 0.0
+        self._retry_wait = RETRY_FIRST
+        #: the longest a line waited between its sample's arrival and the OS, this status
+        #: period and the last one
+        self._lag = 0.0
+        self._last_lag = 0.0
+        #: fsync: when the last one finished (epoch), the longest it took, whether one runs
+        self.synced_at: float | None = None
+        self.max_fsync = 0.0
+        self._sync_due = 0.0
+        self._sync_running = False
+        #: samples the transport may hold before the recorder takes them (set by the service)
+        self.queue: int | None = None
 
     # ---------------------------------------------------------------------------------------
     # Sessions
@@ -296,6 +324,7 @@ class Recorder:
             mission_id=uuid.uuid4().hex,
             part=1,
             counters=self._session_counters(),
+            clock=clock_state(now),
             host=self._host,
             pid=os.getpid(),
             boot=self._boot,
@@ -307,6 +336,9 @@ class Recorder:
         except StorageError as err:
             self._background_failed(err)
         self._write_meta(session, self.meta)
+        self.broken = None
+        self._retry_wait = RETRY_FIRST
+        self._sync_due = now + self.config.fsync_interval
         if session.fallback:
             self.debug(
                 f"could not create {self.config.path}/{session.root}: "
@@ -321,6 +353,8 @@ class Recorder:
         # Posted at once (not only every 2 s): its Community field names the vehicle in a
         # session that has no mission copy and no MOOSDB's DB_TIME (replay, serve read it).
         self.post(self.app_name.upper() + "_STATUS", self.status_text(now))
+        # What was lost while no session was open is this session's first entries.
+        self._write_gaps(now)
         return session
 
     def restart(self) -> Outcome:
@@ -475,6 +509,14 @@ class Recorder:
             "directory": session.directory if session is not None else None,
             "session": session.root if session is not None else None,
             **self.stats.as_dict(),
+            "writing": session is not None,
+            "problem": self.broken,
+            "max_lag": self.max_lag(),
+            "synced_at": self.synced_at,
+            "max_fsync": self.max_fsync,
+            "fsync_interval": self.config.fsync_interval,
+            "clock": clock_state(self._clock()),
+            "queue": self.queue,
             "commands": self.commands.recent(),
             "wire": WIRE_VERSION,
         }
@@ -559,11 +601,16 @@ class Recorder:
         if session is None:
             if verdict is not Verdict.IGNORE or var.system:
                 stats.lost += 1
+                self.losses.add(self.broken or "no-session", 1, now, name=name)
             if is_command:
                 self.commands.moos(msg)
             return
         stamp = msg.time
-        if stamp < self.logstart or abs(stamp - now) > SKEW_TOLERANCE:
+        # The skew rule (docs/compat.md): only a time that is not finite, before LOGSTART or
+        # more than 5 s ahead of the sample's arrival is replaced, by the arrival time. A
+        # late sample (a backlog, here or on the way) keeps its own time. The comparisons
+        # are written so that NaN fails them.
+        if not (stamp >= self.logstart and stamp - now <= SKEW_TOLERANCE):
             stats.skewed += 1
             stamp = now
         offset = stamp - self.logstart
@@ -607,6 +654,7 @@ class Recorder:
         stats.received += 1
         stats.garbled += 1
         stats.lost += 1
+        self.losses.add("unreadable", 1, self._clock())
         # Reported once per key; past 1024 keys only counted, so a flood of distinct bad
         # keys cannot turn into a flood of MOOS_DEBUG posts.
         if key not in self._unreadable and len(self._unreadable) < 1024:
@@ -622,12 +670,15 @@ class Recorder:
         """
         stats = self.stats
         stats.missed += count
+        now = self._clock()
         if name is None:
             stats.lost += count
+            self.losses.add("dropped", count, now)
         else:
             var = self._vars.get(name) or self._var(name)
             if var.verdict is not Verdict.IGNORE or var.system:
                 stats.lost += count
+                self.losses.add("dropped", count, now, name=name)
         self._missed[source] = self._missed.get(source, 0) + count
 
     def _line(self, session: SessionWriter, offset: float, name: str, msg: MoosMessage) -> str:
@@ -818,6 +869,18 @@ class Recorder:
         if now - self._timers.status >= STATUS_INTERVAL:
             self._timers.status = now
             self.post(self.app_name.upper() + "_STATUS", self.status_text(now))
+            session = self.session
+            if session is not None:
+                self._lag += session.take_wait()
+            self._last_lag, self._lag = self._lag, 0.0
+        if self.session is None:
+            if self.broken is not None and now >= self._retry_at:
+                self._retry(now)
+        else:
+            if self.losses and now - self._gaps_at >= GAP_INTERVAL:
+                self._write_gaps(now)
+            if self.config.fsync_interval > 0 and now >= self._sync_due:
+                self._sync(now)
         if now - self._timers.meta >= META_INTERVAL and self.meta is not None:
             self._timers.meta = now
             if self._session_counters() != self._meta_counters:
@@ -888,13 +951,24 @@ class Recorder:
         return since is not None and self._clock() - since >= max_delay
 
     def flush(self) -> None:
-        """Hand what was written to the OS (compressed streams per their interval)."""
+        """Hand what was written to the OS (compressed streams per their interval).
+
+        A session whose directory was removed is noticed here, before its lines would go
+        to files nobody can read: they are counted as lost and a new session opens.
+        """
+        since = self._unflushed_since
         self._unflushed_since = None
         session = self.session
         if session is None:
             return
+        now = self._clock()
+        if since is not None and now - since > self._lag:
+            self._lag = now - since
+        if session.removed():
+            self._session_removed(session, now)
+            return
         try:
-            session.flush(self._clock())
+            session.flush(now)
         except StorageError as err:
             # Buffered lines fail only now: every sample since the last flush is lost.
             lost = self._pending
@@ -917,9 +991,12 @@ class Recorder:
         stats.write_errors += 1
         first = stats.last_error != str(err)
         stats.last_error = str(err)
+        reason = reason_of(err)
+        session = self.session
+        now = self._clock()
+        self.losses.add(reason, lost, now, session=session.root if session is not None else "")
         if first:
             self.debug(f"write error, samples are being lost: {err}")
-        session = self.session
         if session is None or not fallback:
             return
         self.session = None
@@ -928,12 +1005,93 @@ class Recorder:
         with contextlib.suppress(StorageError):
             session.close()
         self._finish(session)
-        if session.fallback or self._in_fallback:
-            # Already in the working directory: nothing left to fall back to. Samples are
-            # counted as lost until a LOGGER_RESTART opens a session again.
-            self.debug("no session is open: samples are being lost until LOGGER_RESTART")
+        if session.fallback or self._in_fallback or self._open_fallback() is None:
+            # Nothing left to fall back to: samples are counted as lost, and a new session
+            # opens by itself once the disk takes writes again (or at a LOGGER_RESTART).
+            self._set_broken(reason, now)
+
+    def _set_broken(self, reason: str, now: float) -> None:
+        self.broken = reason
+        self._retry_at = now + self._retry_wait
+        self.debug(
+            f"no session is open ({reason}): samples are being lost until writing works again"
+        )
+
+    def _session_removed(self, session: SessionWriter, now: float) -> None:
+        """The session's directory (or its alog) was removed while recording: start afresh."""
+        lost = self._pending
+        self._pending = 0
+        stats = self.stats
+        stats.lost += lost
+        stats.write_errors += 1
+        stats.last_error = f"the session directory {session.directory} was removed"
+        self.losses.add("removed", lost, now, session=session.root)
+        self.debug(
+            f"the session directory {session.directory} was removed while recording: "
+            f"{lost} samples not written; opening a new session"
+        )
+        self.session = None
+        self._unflushed_since = None
+        with contextlib.suppress(StorageError):
+            session.close()
+        self.meta = None  # nowhere to write its last version
+        if session.lock is not None:
+            session.lock.release()
+        self.logstart = now
+        try:
+            self._open_session()
+        except StorageError as err:
+            stats.last_error = str(err)
+            self._set_broken("removed", now)
+
+    def _retry(self, now: float) -> None:
+        """With no session open after a failure: open one if the disk takes writes again."""
+        self._retry_wait = min(self._retry_wait * 2, RETRY_MAX)
+        self._retry_at = now + self._retry_wait
+        if not _writable(self.log_root):
             return
-        self._open_fallback()
+        self.logstart = now
+        try:
+            session = self._open_session()
+        except StorageError as err:
+            self.stats.last_error = str(err)
+            return
+        self.debug(f"writing works again: now logging to {session.directory}")
+
+    def _write_gaps(self, now: float) -> None:
+        self._gaps_at = now
+        for gap in self.losses.take(now):
+            self.gap(gap)
+
+    def _sync(self, now: float) -> None:
+        """Sync the open session's files in the background, one at a time (FsyncInterval)."""
+        self._sync_due = now + self.config.fsync_interval
+        session = self.session
+        if session is None or self._sync_running:
+            return
+        self._sync_running = True
+
+        def sync() -> None:
+            started = time.monotonic()
+            try:
+                session.sync()
+            except StorageError as err:
+                self._background_failed(err)
+            else:
+                self.synced_at = now
+                self.max_fsync = max(self.max_fsync, time.monotonic() - started)
+            finally:
+                self._sync_running = False
+
+        self._background(sync)
+
+    def max_lag(self) -> float:
+        """Return the longest a line waited from arrival to readable on disk, lately.
+
+        Readable: handed to the OS (plain), in a complete unit (compressed: the arrival →
+        flush and flush → unit maxima are added, an upper bound); over the last 2-4 s.
+        """
+        return max(self._lag, self._last_lag)
 
     def _open_fallback(self) -> SessionWriter | None:
         """Open a session in the working directory (pLogger's fallback) and announce it."""
@@ -945,3 +1103,17 @@ class Recorder:
             return None
         self.debug(f"now logging to the fallback {session.directory}")
         return session
+
+
+def _writable(path: Path) -> bool:
+    """Return True unless ``path``'s file system is read-only or (nearly) full.
+
+    A directory that no longer exists may be created again (or its fallback used): True.
+    """
+    try:
+        st = os.statvfs(path)
+    except OSError:
+        return True
+    if st.f_flag & os.ST_RDONLY:
+        return False
+    return st.f_bavail * st.f_frsize >= MIN_FREE_BYTES

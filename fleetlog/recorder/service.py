@@ -55,6 +55,13 @@ __all__ = ["RecorderService", "ServiceOptions"]
 MAX_SUBSCRIBERS = 8
 #: subscribers LOG_REQUEST may add (a request whose variable is already covered adds none)
 MAX_REQUEST_SUBSCRIBERS = 32
+#: samples received but not yet logged that the recorder may hold, in all its subscribers'
+#: FIFOs together (a full FIFO makes Zenoh hold BLOCK publishers back). What a SIGKILL
+#: loses is bounded by time, not by a count: this is about 0.15 s at this machine's 50k
+#: samples/s, and stays under a second for a recorder 6 times slower (docs/reliability.md).
+QUEUE = 8192
+#: no subscriber's FIFO holds fewer samples than this
+_MIN_FIFO = 512
 _FLUSH_DELAY = 0.005
 _TICK = 0.02
 #: inside a long drain batch, whether a flush is due is checked every this many samples
@@ -94,6 +101,8 @@ class ServiceOptions:
     #: called from the drain loop at every tick (``time.monotonic()``): feeds systemd's
     #: watchdog, so that a hung drain loop gets the service restarted, not only a dead one
     watchdog: Callable[[float], None] | None = None
+    #: samples received but not yet logged that the recorder may hold (all FIFOs together)
+    queue: int = QUEUE
     #: once started, collect and then freeze the process's objects out of the cyclic GC
     #: (``gc.freeze``), so that a full collection does not walk the start-up objects: it
     #: took 5-8 ms of CPU in a started recorder, a third of the 20 ms flush bound, and
@@ -160,6 +169,8 @@ class RecorderService:
         self._beats: _Fifo | None = None
         #: when every subscriber was last seen empty (monotonic)
         self._drained_at = 0.0
+        #: each subscriber's FIFO capacity
+        self._fifo = max(_MIN_FIFO, options.queue)
 
     def stop(self) -> None:
         """Ask the service to finish (safe from a signal handler or another thread)."""
@@ -173,7 +184,7 @@ class RecorderService:
             # for a variable a wildcard pattern already brings in, for example).
             return
         self._chunks.add(chunk)
-        sub = declare_fifo_subscriber(self._session, self._var_prefix + chunk)
+        sub = declare_fifo_subscriber(self._session, self._var_prefix + chunk, self._fifo)
         self._subscribers.append(sub)
 
     def _subscribe_var(self, name: str) -> None:
@@ -235,8 +246,13 @@ class RecorderService:
                 background=background.submit,
             )
             self.recorder = recorder
-            for chunk in self._initial_chunks(recorder):
+            chunks = self._initial_chunks(recorder)
+            # The queue bound is shared: each FIFO gets its part (a LOG_REQUEST's later one
+            # gets a part too; at most a few are ever added).
+            self._fifo = max(_MIN_FIFO, opts.queue // max(1, len(chunks)))
+            for chunk in chunks:
                 self._subscribe_chunk(chunk)
+            recorder.queue = self._fifo * len(self._subscribers)
             self._beats = declare_fifo_subscriber(session, heartbeat_keys(self._var_prefix + "*"))
             self._refuse_a_second_recorder(session)
             token = declare_token(session, service_key(opts.root, opts.vehicle, "recorder"))

@@ -165,14 +165,15 @@ class SessionWriter:
             )
         directory = session_dir(layout.path, root)
         fallback = False
+        created = False
         try:
-            _mkdir(resolve(directory))
+            created = _mkdir(resolve(directory))
         except OSError as first:
             # pLogger's fallback: the working directory (§1.2).
             directory = session_dir(".", root)
             fallback = True
             try:
-                _mkdir(resolve(directory))
+                created = _mkdir(resolve(directory))
             except OSError as err:
                 msg = (
                     f"cannot create log directory {session_dir(layout.path, root)} "
@@ -189,9 +190,23 @@ class SessionWriter:
             # Closing flushes the same broken file again; the first error is the one to report.
             with contextlib.suppress(StorageError):
                 writer.close()
+            if created:
+                # Never a session: what it created goes, so that retrying on a full disk
+                # does not leave a trail of empty directories.
+                writer._remove_created()
             writer.lock.release()
             raise
         return writer
+
+    def _remove_created(self) -> None:
+        for stream in self._streams:
+            with contextlib.suppress(OSError):
+                stream.path.unlink()
+        for ext in ("._moos", "._hoof"):
+            with contextlib.suppress(OSError):
+                self._file(ext).unlink()
+        with contextlib.suppress(OSError):
+            self.dir_path.rmdir()
 
     def _name(self, ext: str) -> str:
         """The file name pLogger puts in banners: ``dir/root.ext``."""
@@ -366,6 +381,17 @@ class SessionWriter:
                     msg = f"cannot sync {stream.path}: {reason}"
                     raise StorageError(msg) from err
 
+    def removed(self) -> bool:
+        """Return True if the alog was unlinked (its directory removed): writes would vanish."""
+        try:
+            return os.fstat(self.alog.fileno()).st_nlink == 0
+        except (OSError, ValueError):
+            return False
+
+    def take_wait(self) -> float:
+        """Return the longest flushed text waited to become readable (compressed), and reset."""
+        return max((s.take_wait() for s in self._streams), default=0.0)
+
     def paths(self) -> list[Path]:
         """Return the session's files: its logs and the copies made into it."""
         return (
@@ -429,10 +455,16 @@ class SessionWriter:
                 self.lock.release()
 
 
-def _mkdir(path: Path) -> None:
-    """mkdir, not recursive, as pLogger does; an existing directory is reused."""
+def _mkdir(path: Path) -> bool:
+    """mkdir, not recursive, as pLogger does; an existing directory is reused.
+
+    Returns:
+        True if it was created.
+    """
     try:
         path.mkdir(mode=0o755)
     except FileExistsError:
         if not path.is_dir():
             raise
+        return False
+    return True

@@ -27,8 +27,9 @@ from fleetlog.errors import StorageError
 __all__ = ["GzipStream", "OutStream", "PlainStream", "ZstdStream", "open_stream"]
 
 _BUFFER = 1 << 16
-#: the longest a compressed stream keeps data unreadable on disk
-COMPRESSED_FLUSH_INTERVAL = 1.0
+#: the longest a compressed stream keeps data unreadable on disk: half a second, so that
+#: with the recorder's other delays a sample is readable after a crash within a second
+COMPRESSED_FLUSH_INTERVAL = 0.5
 
 
 def _fail(action: str, path: Path, err: OSError) -> NoReturn:
@@ -84,6 +85,13 @@ class OutStream:
     def fileno(self) -> int:
         """Return the file's descriptor (for fsync from another thread)."""
         raise NotImplementedError
+
+    def take_wait(self) -> float:
+        """Return the longest text waited after its flush to become readable, and reset it.
+
+        Plain files: none (a flush hands it to the OS); compressed ones: until their unit ends.
+        """
+        return 0.0
 
     def close(self) -> None:
         """Finish the stream (compressed streams end their frame or gzip member) and close."""
@@ -172,6 +180,9 @@ class _CompressedStream(OutStream):
             _fail("create", path, err)
         self._dirty = False
         self._last = 0.0
+        #: when the oldest text not yet in a complete unit was flushed, and the longest wait
+        self._since: float | None = None
+        self._wait = 0.0
 
     def fileno(self) -> int:
         """Return the file's descriptor."""
@@ -197,9 +208,13 @@ class _CompressedStream(OutStream):
             self._dirty = True
 
     def flush(self, now: float) -> None:
-        """End a readable unit if a second has passed since the last one."""
+        """End a readable unit if its interval has passed since the last one."""
         self._spill()
-        if self._dirty and now - self._last >= COMPRESSED_FLUSH_INTERVAL:
+        if not self._dirty:
+            return
+        if self._since is None:
+            self._since = now
+        if now - self._last >= COMPRESSED_FLUSH_INTERVAL:
             try:
                 self._sync()
                 self._raw.flush()
@@ -207,6 +222,13 @@ class _CompressedStream(OutStream):
                 _fail("write", self.path, err)
             self._dirty = False
             self._last = now
+            self._wait = max(self._wait, now - self._since)
+            self._since = None
+
+    def take_wait(self) -> float:
+        """Return the longest flushed text waited for its unit to end, and reset it."""
+        wait, self._wait = self._wait, 0.0
+        return wait
 
     def close(self) -> None:
         """Finish the stream and close the file."""

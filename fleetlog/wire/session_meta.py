@@ -25,6 +25,7 @@ __all__ = [
     "CLOSED",
     "CUT",
     "MAX_GAPS",
+    "MAX_GAP_VARS",
     "MAX_META_BYTES",
     "META_FORMAT",
     "META_NAME",

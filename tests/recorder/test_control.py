@@ -9,99 +9,20 @@ from __future__ import annotations
 
 import json
 import os
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import replace
 from pathlib import Path
 
 import pytest
 from alog_oracle import iter_entries
+from recorder_support import DIGEST, T0, Rig, rigs
 
-from fleetlog.moos.mission import LoggerConfig, parse_mission
 from fleetlog.recorder.control import QUEUE_LIMIT, RING_SIZE
-from fleetlog.recorder.engine import Recorder
-from fleetlog.storage.metafile import boot_id, host_name, read_meta, recorder_alive, write_meta
-from fleetlog.wire.control import ControlRequest, Outcome, parse_control_request
-from fleetlog.wire.message import MoosMessage
+from fleetlog.storage.metafile import boot_id, host_name, recorder_alive, write_meta
+from fleetlog.wire.control import ControlRequest, Outcome
 from fleetlog.wire.session_meta import ACKS_NAME, META_NAME, SessionMeta
 
-T0 = 1_800_000_000.25
-DIGEST = "ab" * 32
-
-
-class Clock:
-    def __init__(self) -> None:
-        self.t = T0
-
-    def __call__(self) -> float:
-        return self.t
-
-
-def config(body: str) -> LoggerConfig:
-    lines = "\n".join(f"  {line.strip()}" for line in body.strip().splitlines())
-    text = f"Community = alpha\nProcessConfig = pLogger\n{{\n{lines}\n}}\n"
-    return parse_mission(text, "t.moos").logger_config("pLogger")
-
-
-class Rig:
-    def __init__(self, tmp: Path, body: str = "File = R\nPath = logs\nLog = A @ 0") -> None:
-        (tmp / "logs").mkdir(exist_ok=True)
-        (tmp / "mission").mkdir(exist_ok=True)
-        self.clock = Clock()
-        self.posted: list[MoosMessage] = []
-        self.rec = Recorder(
-            config(body),
-            vehicle="alpha",
-            publish=self.posted.append,
-            cwd=tmp,
-            copy_dirs=[tmp / "mission"],
-            clock=self.clock,
-            recorder_id="zid-1",
-        )
-
-    def send(self, name: str, value: float | str | bytes, at: float, source: str = "iOps") -> None:
-        self.clock.t = T0 + at
-        self.rec.handle(MoosMessage(name, value, self.clock.t, source, "", "alpha"))
-
-    @property
-    def dir(self) -> Path:
-        assert self.rec.session is not None
-        return self.rec.session.dir_path
-
-    def meta(self, directory: Path | None = None) -> SessionMeta:
-        found = read_meta(directory or self.dir)
-        assert found is not None
-        return found
-
-    def debugs(self) -> list[str]:
-        texts = [str(m.value) for m in self.posted if m.name == "MOOS_DEBUG"]
-        self.posted.clear()
-        return texts
-
-    def close(self) -> None:
-        self.rec.stop()
-
-    def control(self, obj: dict[str, object]) -> Outcome:
-        """Submit a control request and run it as the drain thread would."""
-        got: list[Outcome] = []
-        self.rec.commands.submit(parse_control_request(json.dumps(obj).encode(), ""), got.append)
-        self.rec.commands.run_queued()
-        (outcome,) = got
-        return outcome
-
-
-@pytest.fixture
-def rigs(tmp_path: Path) -> Iterator[Callable[..., Rig]]:
-    """Make rigs in ``tmp_path``; every recorder is stopped at the end."""
-    made: list[Rig] = []
-
-    def make(body: str = "File = R\nPath = logs\nLog = A @ 0") -> Rig:
-        rig = Rig(tmp_path, body)
-        made.append(rig)
-        return rig
-
-    yield make
-    for rig in made:
-        rig.close()
+__all__ = ["rigs"]  # the fixture, imported
 
 
 def test_moos_commands_keep_their_debug_text_and_land_in_the_ring(
