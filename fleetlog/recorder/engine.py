@@ -208,9 +208,6 @@ class Recorder:
         self._timers = _Timers(monitor=self.logstart, status=self.logstart)
         self.session: SessionWriter | None = None
         self._unflushed_since: float | None = None
-        #: samples written since the last successful flush: a buffered write that fails
-        #: later loses all of them, so all of them are counted as lost
-        self._pending = 0
         #: the open session is the recorder's own fallback after a write error
         self._in_fallback = False
         #: keys already reported as naming no variable
@@ -308,7 +305,6 @@ class Recorder:
         session = SessionWriter.open(layout, self.logstart, when=now, cwd=self._cwd)
         self.session = session
         self._in_fallback = path is not None
-        self._pending = 0
         self._unflushed_since = None
         self.stats.sessions += 1
         self._counters_at_open = self._counters()
@@ -376,6 +372,8 @@ class Recorder:
         except StorageError as err:
             self._storage_failed(err, lost=0)
             new = self._open_fallback()
+            if new is None:
+                self._set_broken(reason_of(err), self._clock())
         if new is not None:
             self.debug(f"Now Logging to : {Path(new.directory).name}")
             return Outcome.done(
@@ -387,15 +385,14 @@ class Recorder:
         session = self.session
         if session is None:
             return
-        pending = self._pending
-        self._pending = 0
         self._unflushed_since = None
         try:
             session.close()
         except StorageError as err:
             # What close could not write is lost; the session is dropped either way.
             self.session = None
-            self._storage_failed(err, lost=pending, fallback=False)
+            self._count_unwritten(session, reason_of(err), self._clock())
+            self._storage_failed(err, lost=0, fallback=False)
         self.session = None
         self._finish(session)
 
@@ -634,11 +631,9 @@ class Recorder:
                 # The slog holds doubles only; a binary sample shows NaN, as a string does.
                 self.synclog.update(name, "" if isinstance(value, bytes) else value)
         except StorageError as err:
-            lost = self._pending + 1
-            self._pending = 0
-            self._storage_failed(err, lost=lost)
+            # A binary record failed: this sample's line was never written.
+            self._storage_failed(err, lost=1)
         else:
-            self._pending += 1
             if self._unflushed_since is None:
                 self._unflushed_since = now
         if is_command:
@@ -876,6 +871,9 @@ class Recorder:
         if self.session is None:
             if self.broken is not None and now >= self._retry_at:
                 self._retry(now)
+        elif self.session.removed():
+            # Noticed while idle too, before the next samples would go to unlinked files.
+            self._session_removed(self.session, now)
         else:
             if self.losses and now - self._gaps_at >= GAP_INTERVAL:
                 self._write_gaps(now)
@@ -970,45 +968,51 @@ class Recorder:
         try:
             session.flush(now)
         except StorageError as err:
-            # Buffered lines fail only now: every sample since the last flush is lost.
-            lost = self._pending
-            self._pending = 0
-            self._storage_failed(err, lost=lost)
-        else:
-            self._pending = 0
+            # Lines fail only now; the streams count exactly those that never reached the file.
+            self._storage_failed(err, lost=0)
 
     def _storage_failed(self, err: FleetlogError, *, lost: int, fallback: bool = True) -> None:
         """Count, report and fall back: a full or read-only disk must not stop the recorder.
 
         Args:
             err: what went wrong.
-            lost: how many received samples it cost.
+            lost: samples in hand that were not written, besides the lines the session's
+                streams count as never written (those are counted here, by variable).
             fallback: drop the broken session and try pLogger's fallback (the working
-                directory); False when the session is being closed anyway.
+                directory); False when the session is being closed anyway (it is passed
+                as ``self.session`` is already cleared, see :meth:`_close_session`).
         """
         stats = self.stats
+        reason = reason_of(err)
+        session = self.session
+        now = self._clock()
+        if session is not None and fallback:
+            self.session = None
+            self._unflushed_since = None
+            with contextlib.suppress(StorageError):
+                session.close()  # writes what it can of the other streams
+            self._count_unwritten(session, reason, now)
+        root = session.root if session is not None else ""
         stats.lost += lost
         stats.write_errors += 1
         first = stats.last_error != str(err)
         stats.last_error = str(err)
-        reason = reason_of(err)
-        session = self.session
-        now = self._clock()
-        self.losses.add(reason, lost, now, session=session.root if session is not None else "")
+        self.losses.add(reason, lost, now, session=root)
         if first:
             self.debug(f"write error, samples are being lost: {err}")
         if session is None or not fallback:
             return
-        self.session = None
-        self._pending = 0
-        self._unflushed_since = None
-        with contextlib.suppress(StorageError):
-            session.close()
         self._finish(session)
         if session.fallback or self._in_fallback or self._open_fallback() is None:
             # Nothing left to fall back to: samples are counted as lost, and a new session
             # opens by itself once the disk takes writes again (or at a LOGGER_RESTART).
             self._set_broken(reason, now)
+
+    def _count_unwritten(self, session: SessionWriter, reason: str, now: float) -> None:
+        """Count as lost, by variable, the lines a failed session never wrote."""
+        for name, count in session.take_unwritten().items():
+            self.stats.lost += count
+            self.losses.add(reason, count, now, name=name, session=session.root)
 
     def _set_broken(self, reason: str, now: float) -> None:
         self.broken = reason
@@ -1018,18 +1022,17 @@ class Recorder:
         )
 
     def _session_removed(self, session: SessionWriter, now: float) -> None:
-        """The session's directory (or its alog) was removed while recording: start afresh."""
-        lost = self._pending
-        self._pending = 0
+        """The session's directory (or its alog) was removed while recording: carry on.
+
+        A new session opens at once with the same LOGSTART, so the lines not yet handed to
+        the OS move into it unchanged (what the OS had went with the directory: the
+        operator removed it). A binary line cannot move (its record went to the removed
+        blog): it is counted lost.
+        """
         stats = self.stats
-        stats.lost += lost
         stats.write_errors += 1
         stats.last_error = f"the session directory {session.directory} was removed"
-        self.losses.add("removed", lost, now, session=session.root)
-        self.debug(
-            f"the session directory {session.directory} was removed while recording: "
-            f"{lost} samples not written; opening a new session"
-        )
+        pending = session.take_pending()
         self.session = None
         self._unflushed_since = None
         with contextlib.suppress(StorageError):
@@ -1037,17 +1040,56 @@ class Recorder:
         self.meta = None  # nowhere to write its last version
         if session.lock is not None:
             session.lock.release()
-        self.logstart = now
+        lost = 0
+
+        def drop(line: str) -> None:
+            nonlocal lost
+            lost += 1
+            fields = line.split(None, 2)
+            name = fields[1] if len(fields) > 1 else None
+            self.losses.add("removed", 1, now, name=name, session=session.root)
+
+        samples = ("alog", "xlog")  # one line per sample; the ylog repeats alog lines
+        for kind in samples:
+            kept = []
+            for line in pending.get(kind, ()):
+                if "<MOOS_BINARY>" in line:
+                    drop(line)
+                else:
+                    kept.append(line)
+            pending[kind] = kept
+        self.losses.add("removed", 0, now, session=session.root, always=True)
         try:
-            self._open_session()
+            new: SessionWriter | None = self._open_session()
         except StorageError as err:
+            new = None
             stats.last_error = str(err)
+        moved = 0
+        for kind, lines in pending.items():
+            stream = None if new is None else getattr(new, kind)
+            for line in lines:
+                if stream is not None:
+                    stream.write(line)
+                    moved += 1
+                elif kind in samples:
+                    drop(line)
+        stats.lost += lost
+        if moved and self._unflushed_since is None:
+            self._unflushed_since = now
+        self.debug(
+            f"the session directory {session.directory} was removed while recording: "
+            f"now logging to {new.directory if new else 'nothing'} ({lost} samples lost)"
+        )
+        if new is None:
             self._set_broken("removed", now)
 
     def _retry(self, now: float) -> None:
-        """With no session open after a failure: open one if the disk takes writes again."""
-        self._retry_wait = min(self._retry_wait * 2, RETRY_MAX)
-        self._retry_at = now + self._retry_wait
+        """With no session open after a failure: open one if the disk takes writes again.
+
+        The file system is asked every second (statvfs: read-only? space?); an attempt that
+        still fails waits twice as long before the next, up to 8 s.
+        """
+        self._retry_at = now + RETRY_FIRST
         if not _writable(self.log_root):
             return
         self.logstart = now
@@ -1055,6 +1097,8 @@ class Recorder:
             session = self._open_session()
         except StorageError as err:
             self.stats.last_error = str(err)
+            self._retry_wait = min(self._retry_wait * 2, RETRY_MAX)
+            self._retry_at = now + self._retry_wait
             return
         self.debug(f"writing works again: now logging to {session.directory}")
 

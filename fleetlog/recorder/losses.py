@@ -44,6 +44,8 @@ class _Loss:
     known: bool = True
     names: dict[str, int] = field(default_factory=dict)
     session: str = ""
+    #: marked even if no sample was lost (a removed directory: what it held is gone)
+    always: bool = False
 
 
 class LossLedger:
@@ -63,11 +65,15 @@ class LossLedger:
         *,
         name: str | None = None,
         session: str = "",
+        always: bool = False,
     ) -> None:
-        """Count ``count`` samples lost for ``reason`` (None: an unknown number)."""
+        """Count ``count`` samples lost for ``reason`` (None: an unknown number).
+
+        ``always``: mark it even if no sample is lost (else a loss of none leaves no gap).
+        """
         loss = self._open.get(reason)
         if loss is None:
-            loss = self._open[reason] = _Loss(now, now, session=session)
+            loss = self._open[reason] = _Loss(now, now, session=session, always=always)
         loss.end = now
         if count is None:
             loss.known = False
@@ -85,7 +91,7 @@ class LossLedger:
         """
         gaps = []
         for reason, loss in self._open.items():
-            if loss.known and not loss.count:
+            if loss.known and not loss.count and not loss.always:
                 continue
             top = sorted(loss.names.items(), key=lambda kv: (-kv[1], kv[0]))[:MAX_GAP_VARS]
             gaps.append(

@@ -388,6 +388,33 @@ class SessionWriter:
         except (OSError, ValueError):
             return False
 
+    def take_unwritten(self) -> dict[str, int]:
+        """Return the samples whose lines never became readable (a failed write), and forget.
+
+        Per variable; only alog and xlog lines count (one per sample).
+        """
+        names: dict[str, int] = {}
+        for stream in (self.alog, self.xlog):
+            if stream is None:
+                continue
+            for name, count in stream.unwritten_names.items():
+                names[name] = names.get(name, 0) + count
+            # Lines whose name was not kept (past 1024 names) are counted without one.
+            rest = stream.unwritten - sum(stream.unwritten_names.values())
+            if rest:
+                names["?"] = names.get("?", 0) + rest
+            stream.unwritten = 0
+            stream.unwritten_names.clear()
+        return names
+
+    def take_pending(self) -> dict[str, list[str]]:
+        """Return the text lines not yet flushed, per stream (alog, xlog, ylog), and forget them."""
+        pending: dict[str, list[str]] = {}
+        for kind, stream in (("alog", self.alog), ("xlog", self.xlog), ("ylog", self.ylog)):
+            if stream is not None:
+                pending[kind] = stream.take_text()
+        return pending
+
     def take_wait(self) -> float:
         """Return the longest flushed text waited to become readable (compressed), and reset."""
         return max((s.take_wait() for s in self._streams), default=0.0)

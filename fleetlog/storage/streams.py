@@ -26,7 +26,6 @@ from fleetlog.errors import StorageError
 
 __all__ = ["GzipStream", "OutStream", "PlainStream", "ZstdStream", "open_stream"]
 
-_BUFFER = 1 << 16
 #: the longest a compressed stream keeps data unreadable on disk: half a second, so that
 #: with the recorder's other delays a sample is readable after a crash within a second
 COMPRESSED_FLUSH_INTERVAL = 0.5
@@ -62,6 +61,30 @@ class OutStream:
         self.path = path
         self._text: list[str] = []
         self.write = self._text.append
+        #: lines written to this stream that never became readable in the file (a failed
+        #: write); each alog or xlog line is one sample, so the recorder counts them lost
+        self.unwritten = 0
+        #: the same, per variable (the second field of each line; 1024 names at most)
+        self.unwritten_names: dict[str, int] = {}
+
+    def _count_unwritten(self, data: bytes) -> None:
+        """Count the lines of ``data`` as never written, by variable (a failure: cold path)."""
+        names = self.unwritten_names
+        for line in data.split(b"\n"):
+            if not line.strip():
+                continue
+            self.unwritten += 1
+            fields = line.split(None, 2)
+            if len(fields) > 1:
+                name = fields[1].decode("utf-8", "surrogateescape")
+                if name in names or len(names) < 1024:
+                    names[name] = names.get(name, 0) + 1
+
+    def take_text(self) -> list[str]:
+        """Return the text lines waiting for the next flush, and forget them."""
+        text = list(self._text)
+        self._text.clear()  # in place: ``write`` is its bound append
+        return text
 
     def _take(self) -> bytes:
         """Return the text written since the last call, encoded, and forget it."""
@@ -99,69 +122,81 @@ class OutStream:
 
 
 class PlainStream(OutStream):
-    """An uncompressed file."""
+    """An uncompressed file, written with one ``write`` per flush (no second buffer).
+
+    Writing straight to the descriptor means a failed write says exactly how many bytes
+    reached the file, so :attr:`unwritten` counts exactly the lines that did not (the last
+    one may be cut: readers expect a cut tail).
+    """
 
     def __init__(self, path: Path) -> None:
         super().__init__(path)
         try:
-            self._file: BinaryIO = open(path, "wb", buffering=_BUFFER)  # noqa: SIM115
+            self._fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_CLOEXEC, 0o644)
         except OSError as err:
             _fail("create", path, err)
+        #: bytes handed to the OS
+        self._size = 0
+        self._closed = False
+
+    def _put(self, data: bytes, lines: int) -> None:
+        """Write ``data`` (``lines`` lines of text, or 0 for raw bytes) to the file."""
+        done = 0
+        try:
+            while done < len(data):
+                done += os.write(self._fd, data[done:] if done else data)
+        except OSError as err:
+            self._size += done
+            if lines:
+                # From the line the failure cut (or the first one not written) to the end.
+                self._count_unwritten(data[data.rfind(b"\n", 0, done) + 1 :])
+            _fail("write", self.path, err)
+        self._size += done
 
     def _spill(self) -> None:
-        """Move the pending text into the file's buffer (before bytes, offsets or a flush)."""
-        data = self._take()
-        if data:
-            try:
-                self._file.write(data)
-            except OSError as err:
-                _fail("write", self.path, err)
+        """Write the pending text (before bytes, offsets or a flush)."""
+        lines = len(self._text)
+        if lines:
+            self._put(self._take(), lines)
 
     def write_bytes(self, data: bytes) -> None:
         """Append raw bytes (after any text written before them)."""
         self._spill()
-        try:
-            self._file.write(data)
-        except OSError as err:
-            _fail("write", self.path, err)
+        self._put(data, 0)
 
     def fileno(self) -> int:
         """Return the file's descriptor."""
-        return self._file.fileno()
+        return self._fd
 
     def tell(self) -> int:
         """Return the current size of what was written."""
         self._spill()
-        return self._file.tell()
+        return self._size
 
     def patch(self, offset: int, data: bytes) -> None:
         """Overwrite bytes already written (the slog's in-place column claim)."""
         self._spill()
         try:
-            self._file.flush()
-            os.pwrite(self._file.fileno(), data, offset)
+            os.pwrite(self._fd, data, offset)
         except OSError as err:
             _fail("write", self.path, err)
 
     def flush(self, now: float) -> None:
         """Hand what was written to the OS."""
         self._spill()
-        try:
-            self._file.flush()
-        except OSError as err:
-            _fail("write", self.path, err)
 
     def close(self) -> None:
-        """Flush and close."""
+        """Write what is pending and close."""
+        if self._closed:
+            return
+        self._closed = True
         try:
             self._spill()
-        except StorageError:
-            _close_quietly(self._file)
-            raise
-        try:
-            self._file.close()
-        except OSError as err:
-            _fail("close", self.path, err)
+        finally:
+            try:
+                os.close(self._fd)
+            except OSError as err:
+                _fail("close", self.path, err)
 
 
 class _CompressedStream(OutStream):
@@ -183,6 +218,8 @@ class _CompressedStream(OutStream):
         #: when the oldest text not yet in a complete unit was flushed, and the longest wait
         self._since: float | None = None
         self._wait = 0.0
+        #: what was fed since the last complete unit: unreadable if the stream is cut now
+        self._fed: list[bytes] = []
 
     def fileno(self) -> int:
         """Return the file's descriptor."""
@@ -197,15 +234,24 @@ class _CompressedStream(OutStream):
     def _finish(self) -> None:
         raise NotImplementedError
 
+    def _lost(self, err: OSError, action: str = "write") -> NoReturn:
+        """Fail: what was fed since the last complete unit (and is pending) is unreadable."""
+        for data in (*self._fed, self._take()):
+            self._count_unwritten(data)
+        self._fed.clear()
+        _fail(action, self.path, err)
+
     def _spill(self) -> None:
         """Feed the pending text to the compressor (it stays before the next unit's end)."""
+        if not self._text:
+            return
         data = self._take()
-        if data:
-            try:
-                self._feed(data)
-            except OSError as err:
-                _fail("write", self.path, err)
-            self._dirty = True
+        self._fed.append(data)
+        try:
+            self._feed(data)
+        except OSError as err:
+            self._lost(err)
+        self._dirty = True
 
     def flush(self, now: float) -> None:
         """End a readable unit if its interval has passed since the last one."""
@@ -219,7 +265,8 @@ class _CompressedStream(OutStream):
                 self._sync()
                 self._raw.flush()
             except OSError as err:
-                _fail("write", self.path, err)
+                self._lost(err)
+            self._fed.clear()
             self._dirty = False
             self._last = now
             self._wait = max(self._wait, now - self._since)
@@ -235,12 +282,14 @@ class _CompressedStream(OutStream):
         try:
             self._spill()
             self._finish()
+            self._raw.flush()
         except OSError as err:
             _close_quietly(self._raw)
-            _fail("close", self.path, err)
+            self._lost(err, "close")
         except StorageError:
             _close_quietly(self._raw)
             raise
+        self._fed.clear()
         try:
             self._raw.close()
         except OSError as err:

@@ -43,10 +43,10 @@ def gaps(rig: Rig, directory: Path | None = None) -> list[str]:
     return [str(e.value) for e in rig.entries(directory) if e.key == "PLOGGER_GAP"]
 
 
-def test_a_removed_session_directory_is_noticed_counted_and_replaced(
+def test_a_removed_session_directory_is_noticed_and_its_pending_lines_move_on(
     rigs: Callable[..., Rig],
 ) -> None:
-    rig = rigs()
+    rig = rigs("File = R\nPath = logs\nLog = A @ 0\nLog = BIN @ 0")
     rig.rec.start()
     first = rig.dir
     rig.send("A", 1.0, at=0.5)
@@ -55,27 +55,50 @@ def test_a_removed_session_directory_is_noticed_counted_and_replaced(
     rig.posted.clear()
     for i in range(3):
         rig.send("A", float(i), at=1.0)  # written, not yet handed to the OS
+    rig.send("BIN", b"\x00\x01", at=1.0)  # its record went to the removed blog
     rig.rec.flush()  # noticed here, before the lines would go to unlinked files
     assert rig.rec.session is not None
     second = rig.dir
     assert second != first
     assert not first.exists()
     stats = rig.rec.stats
-    assert (stats.lost, stats.write_errors, stats.sessions) == (3, 1, 2)
+    assert (stats.lost, stats.write_errors, stats.sessions) == (1, 1, 2)
     assert stats.last_error == f"the session directory logs/{first.name} was removed"
-    assert rig.debugs()[0] == (
+    assert rig.debugs()[-1] == (
         f"the session directory logs/{first.name} was removed while recording: "
-        "3 samples not written; opening a new session"
+        f"now logging to logs/{second.name} (1 samples lost)"
     )
-    # the new session starts with the mark, and goes on logging
+    # the new session keeps LOGSTART: the lines moved unchanged, after the mark
+    assert rig.rec.logstart == T0
     rig.send("A", 7.0, at=1.5)
     entries = rig.entries()
     assert entries[0].key == "PLOGGER_GAP"
     assert entries[0].value == (
-        f"reason=removed,lost=3,from={T0 + 1.0:.3f},to={T0 + 1.0:.3f},session={first.name}"
+        f"reason=removed,lost=1,from={T0 + 1.0:.3f},to={T0 + 1.0:.3f},session={first.name},"
+        "vars=BIN:1"
     )
-    assert [e.value for e in entries if e.key == "A"] == [7.0]
+    assert [(e.offset, e.value) for e in entries if e.key == "A"] == [
+        (1.0, 0.0),
+        (1.0, 1.0),
+        (1.0, 2.0),
+        (1.5, 7.0),
+    ]
     assert rig.meta().gaps[0].reason == "removed"
+
+
+def test_a_session_directory_removed_while_idle_is_replaced_within_a_tick(
+    rigs: Callable[..., Rig],
+) -> None:
+    rig = rigs()
+    rig.rec.start()
+    first = rig.dir
+    shutil.rmtree(first)
+    rig.clock.t = T0 + 0.02
+    rig.rec.tick()
+    assert rig.rec.stats.sessions == 2  # (named as the first: it is gone, the name is free)
+    assert rig.dir.exists()
+    (mark,) = [e for e in rig.entries() if e.key == "PLOGGER_GAP"]
+    assert str(mark.value).startswith("reason=removed,lost=0,")
 
 
 def test_a_disk_that_refuses_writes_is_survived_and_left_as_soon_as_it_works(
@@ -123,7 +146,7 @@ def test_a_disk_that_refuses_writes_is_survived_and_left_as_soon_as_it_works(
     (mark,) = gaps(rig)
     assert mark == (
         f"reason=file-too-large,lost=12,from={T0 + 1.0:.3f},to={T0 + 2.6:.3f},"
-        f"session={first.name},vars=B:6;A:5"
+        f"session={first.name},vars=A:6;B:6"
     )
     assert rig.entries()[0].key == "PLOGGER_GAP"
     assert rig.rec.status()["problem"] is None
