@@ -16,7 +16,7 @@ import stat
 import time
 import uuid
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -81,7 +81,7 @@ def _inline(job: Callable[[], None]) -> None:
     job()
 
 
-@dataclass
+@dataclass(slots=True)
 class RecorderStats:
     """What the recorder did with what it received; nothing is lost without a count here."""
 
@@ -109,7 +109,14 @@ class RecorderStats:
 
     def as_dict(self) -> dict[str, int | str]:
         """Return the counters as a dict (for the status publication and query)."""
-        return dict(self.__dict__)
+        # Never through ``__dict__``: reading an object's ``__dict__`` makes CPython keep its
+        # attributes in a real dict from then on, and every ``stats.x += 1`` in the hot
+        # path slower (measured: 0.1 µs a sample). Slots keep them fast.
+        return {name: getattr(self, name) for name in _STAT_FIELDS}
+
+
+_STAT_FIELDS = tuple(f.name for f in dataclasses.fields(RecorderStats))
+_COUNTER_FIELDS = tuple(f.name for f in dataclasses.fields(RecorderStats) if f.type == "int")
 
 
 @dataclass(slots=True)
@@ -131,6 +138,75 @@ class _Timers:
     status: float = 0.0
     missed: float = -1e300
     meta: float = 0.0
+    #: when the last slog row was written
+    last_row: float = -1e300
+
+
+@dataclass
+class _Health:
+    """How writing goes: failures, retries, lag, fsync (cold state, kept off the Recorder).
+
+    The Recorder itself keeps at most 30 attributes: CPython 3.11 keeps an instance's
+    attributes inline (fast ``self.x`` in the hot path) only up to that many; past it every
+    attribute read in :meth:`Recorder.handle` got 15 % slower (measured, docs/reliability.md).
+    """
+
+    #: why no session is open after a failure (None while writing works)
+    broken: str | None = None
+    retry_at: float = 0.0
+    retry_wait: float = 1.0
+    #: the longest a line waited between arrival and the OS, this status period and the last
+    lag: float = 0.0
+    last_lag: float = 0.0
+    #: fsync: when the last one finished (epoch), the longest it took, the next, one running
+    synced_at: float | None = None
+    max_fsync: float = 0.0
+    sync_due: float = 0.0
+    sync_running: bool = False
+    #: when losses were last marked in the alog
+    gaps_at: float = 0.0
+    #: samples the transport may hold before the recorder takes them (set by the service)
+    queue: int | None = None
+    #: the open session is the recorder's own fallback after a write error
+    in_fallback: bool = False
+    #: keys already reported as naming no variable
+    unreadable: set[str] = field(default_factory=set)
+    #: samples lost on the way per publisher (its Zenoh id), not yet on MOOS_DEBUG
+    missed: dict[str, int] = field(default_factory=dict)
+
+
+@dataclass
+class _CommandLimits:
+    """What LOG_REQUEST and COPY_FILE_REQUEST have used of their bounds (issue 10)."""
+
+    #: variables added by LOG_REQUEST so far (at most MAX_LOG_REQUESTS)
+    requested: int = 0
+    #: copies made by COPY_FILE_REQUEST into the session they were made in
+    copy_session: SessionWriter | None = None
+    copies: int = 0
+
+
+@dataclass
+class _AppStatus:
+    """What CMOOSApp's status says beyond the counters: CPU and memory, posts, subscriptions."""
+
+    proc: ProcessMonitor = field(default_factory=ProcessMonitor)
+    published: set[str] = field(default_factory=set)
+    subscribed: set[str] = field(default_factory=set)
+
+
+@dataclass
+class _MetaState:
+    """The open session's metadata and what it is built from."""
+
+    recorder_id: str
+    host: str
+    boot: str
+    meta: SessionMeta | None = None
+    counters_at_open: dict[str, int] = field(default_factory=dict)
+    meta_counters: dict[str, int] = field(default_factory=dict)
+    #: sessions found cut at start, marked by the first session's first entries
+    cut_sessions: list[SessionMeta] = field(default_factory=list)
 
 
 class Recorder:
@@ -165,7 +241,6 @@ class Recorder:
         background: Background = _inline,
     ) -> None:
         self.config = config
-        self.recorder_id = recorder_id
         self._background = background
         self.vehicle = vehicle
         self._publish = publish
@@ -179,9 +254,9 @@ class Recorder:
         #: LOGSTART: taken at construction, before Zenoh connects, as CMOOSApp does
         self.logstart = clock()
         self.started = self.logstart
-        self._variant = Variant.EM if config.variant == "em" else Variant.IVP
+        variant = Variant.EM if config.variant == "em" else Variant.IVP
         self._fmt = LineFormatter(
-            self._variant, config.double_precision, mark_data_type=config.mark_data_type
+            variant, config.double_precision, mark_data_type=config.mark_data_type
         )
         specs: dict[str, LogSpec] = {}
         for spec in config.log_specs:
@@ -197,58 +272,54 @@ class Recorder:
         self._vars: dict[str, _Var] = {}
         self._sources: dict[tuple[str, str, str], str] = {}
         self.commands = CommandHandler(self, clock)
-        self._restart_var = self.commands.restart_var
-        self._command_var = self.commands.command_var
+        #: the two command variables (LOGGER_RESTART, <APP>_CMD)
+        self._cmd_names = frozenset((self.commands.restart_var, self.commands.command_var))
         self.monitored = [s.var for s in specs.values() if s.monitor]
         sync_columns = [s.var for s in specs.values() if s.sync]
         self.synclog = (
             SlogTable(sync_columns, config.dynamic_sync_log_columns) if config.sync_log else None
         )
-        self._last_row = -1e300
         self._timers = _Timers(monitor=self.logstart, status=self.logstart)
         self.session: SessionWriter | None = None
         self._unflushed_since: float | None = None
-        #: the open session is the recorder's own fallback after a write error
-        self._in_fallback = False
-        #: keys already reported as naming no variable
-        self._unreadable: set[str] = set()
-        #: variables added by LOG_REQUEST so far (at most MAX_LOG_REQUESTS)
-        self._requested = 0
-        #: copies made by COPY_FILE_REQUEST into the session they were made in
-        self._copy_session: SessionWriter | None = None
-        self._copies = 0
-        #: samples lost on the way per publisher (its Zenoh id), not yet on MOOS_DEBUG
-        self._missed: dict[str, int] = {}
-        #: the open session's metadata, and the counters when it opened
-        self.meta: SessionMeta | None = None
-        self._counters_at_open: dict[str, int] = {}
-        self._meta_counters: dict[str, int] = {}
-        self._host = host_name()
-        self._boot = boot_id()
-        #: sessions found cut at start, marked by the first session's first entries
-        self.cut_sessions: list[SessionMeta] = []
+        #: what LOG_REQUEST and COPY_FILE_REQUEST have used of their bounds
+        self._limits = _CommandLimits()
         #: CMOOSApp's status fields: CPU and memory, what it posts, what it receives
-        self._proc = ProcessMonitor()
-        self._published: set[str] = set()
-        self._subscribed: set[str] = set()
+        self._app = _AppStatus()
         #: losses not yet marked in a log (docs/compat.md, PLOGGER_GAP)
         self.losses = LossLedger()
-        self._gaps_at = 0.0
-        #: why no session is open after a failure (None while writing works)
-        self.broken: str | None = None
-        self._retry_at = 0.0
-        self._retry_wait = RETRY_FIRST
-        #: the longest a line waited between its sample's arrival and the OS, this status
-        #: period and the last one
-        self._lag = 0.0
-        self._last_lag = 0.0
-        #: fsync: when the last one finished (epoch), the longest it took, whether one runs
-        self.synced_at: float | None = None
-        self.max_fsync = 0.0
-        self._sync_due = 0.0
-        self._sync_running = False
-        #: samples the transport may hold before the recorder takes them (set by the service)
-        self.queue: int | None = None
+        self._h = _Health()
+        self._m = _MetaState(recorder_id, host_name(), boot_id())
+        # Keep the attributes above at 30 or fewer (see _Health): new state goes in a group.
+
+    @property
+    def broken(self) -> str | None:
+        """Why no session is open after a failure (None while writing works)."""
+        return self._h.broken
+
+    @property
+    def synced_at(self) -> float | None:
+        """When the open session's files were last fsynced (epoch)."""
+        return self._h.synced_at
+
+    @property
+    def meta(self) -> SessionMeta | None:
+        """The open session's metadata."""
+        return self._m.meta
+
+    @property
+    def cut_sessions(self) -> list[SessionMeta]:
+        """The sessions found cut when the recorder started."""
+        return self._m.cut_sessions
+
+    @property
+    def queue(self) -> int | None:
+        """Samples the transport may hold before the recorder takes them."""
+        return self._h.queue
+
+    @queue.setter
+    def queue(self, value: int | None) -> None:
+        self._h.queue = value
 
     # ---------------------------------------------------------------------------------------
     # Sessions
@@ -261,7 +332,7 @@ class Recorder:
             path=cfg.path,
             timestamp=cfg.file_timestamp,
             utc=cfg.utc_log_directories,
-            variant=self._variant,
+            variant=Variant.EM if cfg.variant == "em" else Variant.IVP,
             compression=cfg.compress_alogs,
             sync_log=cfg.sync_log,
             exclusion_log=cfg.wildcard_exclusion_log,
@@ -288,12 +359,12 @@ class Recorder:
         Raises:
             StorageError: no session directory could be created at all.
         """
-        self.cut_sessions = mark_cut_sessions(self.log_root, self._clock())
+        self._m.cut_sessions = mark_cut_sessions(self.log_root, self._clock())
         session = self._open_session()
-        for cut in self.cut_sessions:
+        for cut in self._m.cut_sessions:
             # A crash's gap is the first entry of the next session.
             self.gap(Gap(self._clock(), "crash", None, cut.updated, self.logstart, {}, cut.session))
-        if self.cut_sessions:
+        if self._m.cut_sessions:
             self.flush()  # the mark reaches the OS now, not with the first sample
         return session
 
@@ -304,15 +375,15 @@ class Recorder:
             layout = dataclasses.replace(layout, path=path)
         session = SessionWriter.open(layout, self.logstart, when=now, cwd=self._cwd)
         self.session = session
-        self._in_fallback = path is not None
+        self._h.in_fallback = path is not None
         self._unflushed_since = None
         self.stats.sessions += 1
-        self._counters_at_open = self._counters()
-        self.meta = SessionMeta(
+        self._m.counters_at_open = self._counters()
+        self._m.meta = SessionMeta(
             state=OPEN,
             vehicle=self.vehicle,
             session=session.root,
-            recorder=self.recorder_id,
+            recorder=self._m.recorder_id,
             fleetlog=__version__,
             opened=now,
             logstart=self.logstart,
@@ -321,20 +392,20 @@ class Recorder:
             part=1,
             counters=self._session_counters(),
             clock=clock_state(now),
-            host=self._host,
+            host=self._m.host,
             pid=os.getpid(),
-            boot=self._boot,
+            boot=self._m.boot,
         )
         # Visible at once (without waiting for the disk), so the session is never without
         # its state; made durable by the background writer right after.
         try:
-            session.write_meta(self.meta.to_bytes(), durable=False)
+            session.write_meta(self._m.meta.to_bytes(), durable=False)
         except StorageError as err:
             self._background_failed(err)
-        self._write_meta(session, self.meta)
-        self.broken = None
-        self._retry_wait = RETRY_FIRST
-        self._sync_due = now + self.config.fsync_interval
+        self._write_meta(session, self._m.meta)
+        self._h.broken = None
+        self._h.retry_wait = RETRY_FIRST
+        self._h.sync_due = now + self.config.fsync_interval
         if session.fallback:
             self.debug(
                 f"could not create {self.config.path}/{session.root}: "
@@ -398,8 +469,8 @@ class Recorder:
 
     def _finish(self, session: SessionWriter) -> None:
         """Sync a closed session's files and write its last metadata, off this thread."""
-        meta = self.meta
-        self.meta = None
+        meta = self._m.meta
+        self._m.meta = None
         final = None
         if meta is not None:
             final = dataclasses.replace(meta, counters=self._session_counters()).with_state(
@@ -423,17 +494,18 @@ class Recorder:
 
     def subscription_chunks(self) -> list[str]:
         """Return the variable key chunks to subscribe to: logged names and the commands."""
-        commands = [name_to_chunk(self._restart_var), name_to_chunk(self._command_var)]
+        commands = [name_to_chunk(name) for name in sorted(self._cmd_names)]
         return [*self._classifier.key_suffixes(), *commands]
 
     # ---------------------------------------------------------------------------------------
     # Session metadata
 
     def _counters(self) -> dict[str, int]:
-        return {k: v for k, v in self.stats.__dict__.items() if isinstance(v, int)}
+        stats = self.stats
+        return {name: getattr(stats, name) for name in _COUNTER_FIELDS}
 
     def _session_counters(self) -> dict[str, int]:
-        base = self._counters_at_open
+        base = self._m.counters_at_open
         return {k: v - base.get(k, 0) for k, v in self._counters().items()}
 
     def _write_meta(self, session: SessionWriter, meta: SessionMeta) -> None:
@@ -451,14 +523,14 @@ class Recorder:
 
     def _update_meta(self, now: float, **changes: Any) -> None:
         """Rewrite the open session's metadata with the current counters (and ``changes``)."""
-        session, meta = self.session, self.meta
+        session, meta = self.session, self._m.meta
         if session is None or meta is None:
             return
         counters = self._session_counters()
-        self._meta_counters = counters
-        self.meta = dataclasses.replace(meta, counters=counters, updated=now, **changes)
+        self._m.meta_counters = counters
+        self._m.meta = dataclasses.replace(meta, counters=counters, updated=now, **changes)
         self._timers.meta = now
-        self._write_meta(session, self.meta)
+        self._write_meta(session, self._m.meta)
 
     def _background_failed(self, err: StorageError) -> None:
         """Report a failed fsync or metadata write (from the background thread)."""
@@ -481,14 +553,14 @@ class Recorder:
             return
         if self._unflushed_since is None:
             self._unflushed_since = now
-        meta = self.meta
+        meta = self._m.meta
         if meta is not None:
             gaps = meta.gaps if len(meta.gaps) < MAX_GAPS else meta.gaps[1:]
             self._update_meta(now, gaps=(*gaps, gap))
 
     def note(self, key: str, value: str) -> Outcome:
         """Set a note on the open session (its metadata's ``notes``)."""
-        meta = self.meta
+        meta = self._m.meta
         if meta is None or self.session is None:
             return Outcome.refused("note", "no session is open")
         if not key.strip() or any(ord(c) < 32 for c in key):
@@ -507,13 +579,13 @@ class Recorder:
             "session": session.root if session is not None else None,
             **self.stats.as_dict(),
             "writing": session is not None,
-            "problem": self.broken,
+            "problem": self._h.broken,
             "max_lag": self.max_lag(),
-            "synced_at": self.synced_at,
-            "max_fsync": self.max_fsync,
+            "synced_at": self._h.synced_at,
+            "max_fsync": self._h.max_fsync,
             "fsync_interval": self.config.fsync_interval,
             "clock": clock_state(self._clock()),
-            "queue": self.queue,
+            "queue": self._h.queue,
             "commands": self.commands.recent(),
             "wire": WIRE_VERSION,
         }
@@ -524,7 +596,7 @@ class Recorder:
     def post(self, name: str, value: float | str) -> None:
         """Publish a message as pLogger (it comes back and is logged like any other)."""
         now = self._clock()
-        self._published.add(name)
+        self._app.published.add(name)
         self._publish(MoosMessage(name, value, now, self.app_name, "", self.vehicle))
 
     def debug(self, text: str) -> None:
@@ -539,16 +611,16 @@ class Recorder:
         spec = self._specs.get(name)
         if spec is not None:
             period = spec.period
-        elif name == self._restart_var:
+        elif name == self.commands.restart_var:
             period = 0.5
         else:
             period = 0.0
         var = _Var(verdict, period, name.upper() in _SYSTEM_VARS)
         if len(self._vars) > 65536:
             self._vars.clear()
-            self._subscribed.clear()
+            self._app.subscribed.clear()
         if verdict is not Verdict.IGNORE:
-            self._subscribed.add(name)
+            self._app.subscribed.add(name)
         self._vars[name] = var
         return var
 
@@ -584,7 +656,7 @@ class Recorder:
                 var.kind = kind
             else:
                 stats.type_clashes += 1
-        is_command = name == self._restart_var or name == self._command_var
+        is_command = name in self._cmd_names
         now = self._clock()
         var.last_seen = now
         if var.period > 0.0:
@@ -598,7 +670,7 @@ class Recorder:
         if session is None:
             if verdict is not Verdict.IGNORE or var.system:
                 stats.lost += 1
-                self.losses.add(self.broken or "no-session", 1, now, name=name)
+                self.losses.add(self._h.broken or "no-session", 1, now, name=name)
             if is_command:
                 self.commands.moos(msg)
             return
@@ -652,8 +724,8 @@ class Recorder:
         self.losses.add("unreadable", 1, self._clock())
         # Reported once per key; past 1024 keys only counted, so a flood of distinct bad
         # keys cannot turn into a flood of MOOS_DEBUG posts.
-        if key not in self._unreadable and len(self._unreadable) < 1024:
-            self._unreadable.add(key)
+        if key not in self._h.unreadable and len(self._h.unreadable) < 1024:
+            self._h.unreadable.add(key)
             self.debug(f"sample on {key} names no MOOS variable: not logged")
 
     def missed(self, name: str | None, source: str, count: int) -> None:
@@ -674,7 +746,7 @@ class Recorder:
             if var.verdict is not Verdict.IGNORE or var.system:
                 stats.lost += count
                 self.losses.add("dropped", count, now, name=name)
-        self._missed[source] = self._missed.get(source, 0) + count
+        self._h.missed[source] = self._h.missed.get(source, 0) + count
 
     def _line(self, session: SessionWriter, offset: float, name: str, msg: MoosMessage) -> str:
         value = msg.value
@@ -710,7 +782,7 @@ class Recorder:
         why = None
         if len(spec.var) > MAX_VAR_NAME:
             why = f"the variable's name is {len(spec.var)} characters long: at most {MAX_VAR_NAME}"
-        elif self._requested >= MAX_LOG_REQUESTS:
+        elif self._limits.requested >= MAX_LOG_REQUESTS:
             why = f"at most {MAX_LOG_REQUESTS} variables may be added by LOG_REQUEST"
         if why is not None:
             self.debug(f"refused dynamic log request {quote(spec.var)}: {why}")
@@ -728,7 +800,7 @@ class Recorder:
                 self.debug(f"could not subscribe to {spec.var}: {err}")
                 did += f" (but the subscription failed: {err})"
         self._classifier.add_log_var(spec.var)
-        self._requested += 1
+        self._limits.requested += 1
         self._specs[spec.var] = spec
         self._vars.pop(spec.var, None)
         if spec.monitor:
@@ -766,12 +838,12 @@ class Recorder:
             file.close()
             self.debug("failed to open file for writing")
             return Outcome.refused("copy_file", "no session is open")
-        if self._copy_session is not session:
-            self._copy_session, self._copies = session, 0
-        if self._copies >= MAX_COPIES:
+        if self._limits.copy_session is not session:
+            self._limits.copy_session, self._limits.copies = session, 0
+        if self._limits.copies >= MAX_COPIES:
             file.close()
             return self._refuse_copy(requested, f"at most {MAX_COPIES} copies per session")
-        self._copies += 1
+        self._limits.copies += 1
 
         def copy() -> None:
             with file:
@@ -844,44 +916,44 @@ class Recorder:
         if (
             self.synclog is not None
             and self.session is not None
-            and now - self._last_row > self.config.sync_period
+            and now - self._timers.last_row > self.config.sync_period
         ):
-            self._last_row = now
+            self._timers.last_row = now
             self._write_slog(self.synclog.row(now - self.logstart))
         if now - self._timers.monitor >= MONITOR_INTERVAL:
             self._timers.monitor = now
             self._monitor(now)
             if self.session is not None:
                 self.post("LOGGER_DIRECTORY", self.session.directory)
-        if self._missed and now - self._timers.missed >= MISSED_REPORT_INTERVAL:
+        if self._h.missed and now - self._timers.missed >= MISSED_REPORT_INTERVAL:
             self._timers.missed = now
-            for source, count in self._missed.items():
+            for source, count in self._h.missed.items():
                 self.debug(
                     f"{count} samples from {source} were lost before reaching the recorder "
                     "(DROP congestion control)"
                 )
-            self._missed.clear()
+            self._h.missed.clear()
         if now - self._timers.status >= STATUS_INTERVAL:
             self._timers.status = now
             self.post(self.app_name.upper() + "_STATUS", self.status_text(now))
             session = self.session
             if session is not None:
-                self._lag += session.take_wait()
-            self._last_lag, self._lag = self._lag, 0.0
+                self._h.lag += session.take_wait()
+            self._h.last_lag, self._h.lag = self._h.lag, 0.0
         if self.session is None:
-            if self.broken is not None and now >= self._retry_at:
+            if self._h.broken is not None and now >= self._h.retry_at:
                 self._retry(now)
         elif self.session.removed():
             # Noticed while idle too, before the next samples would go to unlinked files.
             self._session_removed(self.session, now)
         else:
-            if self.losses and now - self._gaps_at >= GAP_INTERVAL:
+            if self.losses and now - self._h.gaps_at >= GAP_INTERVAL:
                 self._write_gaps(now)
-            if self.config.fsync_interval > 0 and now >= self._sync_due:
+            if self.config.fsync_interval > 0 and now >= self._h.sync_due:
                 self._sync(now)
-        if now - self._timers.meta >= META_INTERVAL and self.meta is not None:
+        if now - self._timers.meta >= META_INTERVAL and self._m.meta is not None:
             self._timers.meta = now
-            if self._session_counters() != self._meta_counters:
+            if self._session_counters() != self._m.meta_counters:
                 self._update_meta(now)
         # Compressed streams close a frame only when flushed a second after the last one;
         # flushing on every tick keeps that bound when no more samples arrive.
@@ -928,12 +1000,12 @@ class Recorder:
         """
         s = self.stats
         directory = self.session.directory if self.session else ""
-        subscribed = self._subscribed | {*self._specs, self._restart_var, self._command_var}
-        publishing = "".join(f"{n}," for n in sorted(self._published))
+        subscribed = self._app.subscribed | {*self._specs, *self._cmd_names}
+        publishing = "".join(f"{n}," for n in sorted(self._app.published))
         subscribing = "".join(f"{n}," for n in sorted(subscribed))
         return (
             f"AppErrorFlag={'true' if s.lost else 'false'},Uptime={now - self.started:.6g},"
-            f"{self._proc.fields()},"
+            f"{self._app.proc.fields()},"
             f"MOOSName={self.app_name},Community={self.vehicle},"
             f'Publishing="{publishing}",Subscribing="{subscribing}",'
             f"LogAuxSrc={'true' if self.config.log_aux_src else 'false'},"
@@ -960,8 +1032,8 @@ class Recorder:
         if session is None:
             return
         now = self._clock()
-        if since is not None and now - since > self._lag:
-            self._lag = now - since
+        if since is not None and now - since > self._h.lag:
+            self._h.lag = now - since
         if session.removed():
             self._session_removed(session, now)
             return
@@ -1003,7 +1075,7 @@ class Recorder:
         if session is None or not fallback:
             return
         self._finish(session)
-        if session.fallback or self._in_fallback or self._open_fallback() is None:
+        if session.fallback or self._h.in_fallback or self._open_fallback() is None:
             # Nothing left to fall back to: samples are counted as lost, and a new session
             # opens by itself once the disk takes writes again (or at a LOGGER_RESTART).
             self._set_broken(reason, now)
@@ -1015,8 +1087,8 @@ class Recorder:
             self.losses.add(reason, count, now, name=name, session=session.root)
 
     def _set_broken(self, reason: str, now: float) -> None:
-        self.broken = reason
-        self._retry_at = now + self._retry_wait
+        self._h.broken = reason
+        self._h.retry_at = now + self._h.retry_wait
         self.debug(
             f"no session is open ({reason}): samples are being lost until writing works again"
         )
@@ -1037,7 +1109,7 @@ class Recorder:
         self._unflushed_since = None
         with contextlib.suppress(StorageError):
             session.close()
-        self.meta = None  # nowhere to write its last version
+        self._m.meta = None  # nowhere to write its last version
         if session.lock is not None:
             session.lock.release()
         lost = 0
@@ -1089,7 +1161,7 @@ class Recorder:
         The file system is asked every second (statvfs: read-only? space?); an attempt that
         still fails waits twice as long before the next, up to 8 s.
         """
-        self._retry_at = now + RETRY_FIRST
+        self._h.retry_at = now + RETRY_FIRST
         if not _writable(self.log_root):
             return
         self.logstart = now
@@ -1097,23 +1169,23 @@ class Recorder:
             session = self._open_session()
         except StorageError as err:
             self.stats.last_error = str(err)
-            self._retry_wait = min(self._retry_wait * 2, RETRY_MAX)
-            self._retry_at = now + self._retry_wait
+            self._h.retry_wait = min(self._h.retry_wait * 2, RETRY_MAX)
+            self._h.retry_at = now + self._h.retry_wait
             return
         self.debug(f"writing works again: now logging to {session.directory}")
 
     def _write_gaps(self, now: float) -> None:
-        self._gaps_at = now
+        self._h.gaps_at = now
         for gap in self.losses.take(now):
             self.gap(gap)
 
     def _sync(self, now: float) -> None:
         """Sync the open session's files in the background, one at a time (FsyncInterval)."""
-        self._sync_due = now + self.config.fsync_interval
+        self._h.sync_due = now + self.config.fsync_interval
         session = self.session
-        if session is None or self._sync_running:
+        if session is None or self._h.sync_running:
             return
-        self._sync_running = True
+        self._h.sync_running = True
 
         def sync() -> None:
             started = time.monotonic()
@@ -1122,10 +1194,10 @@ class Recorder:
             except StorageError as err:
                 self._background_failed(err)
             else:
-                self.synced_at = now
-                self.max_fsync = max(self.max_fsync, time.monotonic() - started)
+                self._h.synced_at = now
+                self._h.max_fsync = max(self._h.max_fsync, time.monotonic() - started)
             finally:
-                self._sync_running = False
+                self._h.sync_running = False
 
         self._background(sync)
 
@@ -1135,7 +1207,7 @@ class Recorder:
         Readable: handed to the OS (plain), in a complete unit (compressed: the arrival →
         flush and flush → unit maxima are added, an upper bound); over the last 2-4 s.
         """
-        return max(self._lag, self._last_lag)
+        return max(self._h.lag, self._h.last_lag)
 
     def _open_fallback(self) -> SessionWriter | None:
         """Open a session in the working directory (pLogger's fallback) and announce it."""

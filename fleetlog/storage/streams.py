@@ -26,9 +26,11 @@ from fleetlog.errors import StorageError
 
 __all__ = ["GzipStream", "OutStream", "PlainStream", "ZstdStream", "open_stream"]
 
-#: the longest a compressed stream keeps data unreadable on disk: half a second, so that
-#: with the recorder's other delays a sample is readable after a crash within a second
-COMPRESSED_FLUSH_INTERVAL = 0.5
+#: the longest a compressed stream keeps data unreadable on disk: a quarter second, so that
+#: with the recorder's other delays a sample is readable after a crash within a second even
+#: on a loaded machine (bench/faults.py); it costs zstd up to 10 % in size at 50k lines/s,
+#: gzip nothing (bench/compressed_units.py, docs/reliability.md)
+COMPRESSED_FLUSH_INTERVAL = 0.25
 
 
 def _fail(action: str, path: Path, err: OSError) -> NoReturn:

@@ -131,21 +131,21 @@ def zstd_text(path: Path) -> tuple[str, int]:
     return text.decode("utf-8", "surrogateescape"), frames
 
 
-def test_zstd_frames_close_at_most_every_half_second_with_every_line(tmp_path: Path) -> None:
-    assert COMPRESSED_FLUSH_INTERVAL == 0.5
+def test_zstd_frames_close_at_most_every_quarter_second_with_every_line(tmp_path: Path) -> None:
+    assert COMPRESSED_FLUSH_INTERVAL == 0.25
     path = tmp_path / "a.alog.zst"
     stream = ZstdStream(path)
     stream.write(LINES[0])
-    stream.flush(10.0)  # half a second since the (zero) start: a frame
+    stream.flush(10.0)  # an interval since the (zero) start: a frame
     assert zstd_text(path) == (LINES[0], 1)
     stream.write(LINES[1])
-    stream.flush(10.2)  # fed to the compressor, but inside the same interval: no frame
+    stream.flush(10.1)  # fed to the compressor, but inside the same interval: no frame
     stream.write(LINES[2])
-    stream.flush(10.45)
+    stream.flush(10.2)
     assert zstd_text(path) == (LINES[0], 1)
-    stream.flush(10.5)
+    stream.flush(10.25)
     assert zstd_text(path) == ("".join(LINES[:3]), 2)
-    assert stream.take_wait() == pytest.approx(0.3)  # LINES[1] waited from 10.2 to 10.5
+    assert stream.take_wait() == pytest.approx(0.15)  # LINES[1] waited from 10.1 to 10.25
     assert stream.take_wait() == 0.0
     stream.flush(13.0)  # nothing new: no empty frame
     assert zstd_text(path)[1] == 2
@@ -154,7 +154,7 @@ def test_zstd_frames_close_at_most_every_half_second_with_every_line(tmp_path: P
     assert zstd_text(path)[0] == "".join(LINES[:3]) + LINES[4]
 
 
-def test_gzip_sync_points_at_most_every_half_second_with_every_line(tmp_path: Path) -> None:
+def test_gzip_sync_points_at_most_every_quarter_second_with_every_line(tmp_path: Path) -> None:
     path = tmp_path / "a.alog.gz"
     stream = GzipStream(path)
 
@@ -165,9 +165,9 @@ def test_gzip_sync_points_at_most_every_half_second_with_every_line(tmp_path: Pa
     stream.flush(10.0)
     assert readable() == encoded(LINES[:1])
     stream.write(LINES[1])
-    stream.flush(10.25)
+    stream.flush(10.2)
     assert readable() == encoded(LINES[:1])
-    stream.flush(10.5)
+    stream.flush(10.25)
     assert readable() == encoded(LINES[:2])
     stream.write(LINES[4])
     stream.close()
