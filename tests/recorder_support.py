@@ -7,7 +7,6 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
-
 from alog_oracle import iter_entries
 
 from fleetlog.moos.alog import Entry

@@ -354,7 +354,7 @@ def test_a_backlog_never_changes_a_time(
     record: Callable[..., Recorder], endpoint: str, zenoh_session: ZenohSession, tmp_path: Path
 ) -> None:
     (tmp_path / "m.moos").write_text(MISSION.format(path="./", compress="zstd"))
-    record(tmp_path, "m.moos")
+    rec = record(tmp_path, "m.moos")
     offered = 400_000.0  # per second: several times what any recorder here takes in
     n = 60_000
     with vehicle(endpoint) as v:
@@ -367,6 +367,7 @@ def test_a_backlog_never_changes_a_time(
         body = wait_status(zenoh_session, lambda b: b["received"] >= n)
     assert (body["skewed"], body["lost"]) == (0, 0)
     assert body["max_lag"] < 1.0
+    assert rec.stop(signal.SIGINT) == 0  # the last zstd frame closes
     (alog,) = alogs(tmp_path)
     got = [(when, int(value)) for when, key, value in records(alog) if key == "NAV_SEQ"]
     assert [i for _, i in got] == list(range(n))
