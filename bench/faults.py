@@ -16,11 +16,12 @@
      speed the loss window also counts what the kernel held, which is not the recorder's.
 3. **Overload at 3× the loss-free rate**: samples stamped on an offered schedule three times
    faster than the recorder takes them (BLOCK holds the publisher back, so the stamps fall
-   further and further behind: past 5 s after 7.5 s), then every line's time is checked
-   against its stamp, with ``skewed`` and ``lost`` 0.
+   further and further behind), published until they are ``--behind`` seconds (8) behind,
+   well past pLogger's 5 s; then every line's time is checked against its stamp, with
+   ``skewed`` and ``lost`` 0.
 
-    python bench/faults.py                    # 3 kills per case, overload for 10 s of schedule
-    python bench/faults.py --kills 5 --overload 12
+    python bench/faults.py                    # 3 kills per case, overload until 8 s behind
+    python bench/faults.py --kills 5 --behind 10 --skip-kills
 
 The machine is shared: the load average is printed before and after.
 """
@@ -64,6 +65,7 @@ def pub_main(argv: list[str]) -> int:
     parser.add_argument("--rate", type=float, default=0.0, help="paced per second; 0: full speed")
     parser.add_argument("--offered", type=float, default=0.0, help="stamp schedule; 0: real time")
     parser.add_argument("-n", type=int, default=10**9)
+    parser.add_argument("--behind", type=float, default=0.0, help="stop once stamps lag this")
     parser.add_argument("--stamps", required=True)
     args = parser.parse_args(argv)
     session = open_session(SessionOptions(connect=(args.connect,), multicast_scouting=False))
@@ -98,6 +100,8 @@ def pub_main(argv: list[str]) -> int:
                 time.sleep(min(ahead, 0.001))
                 continue
         stamp = t0 + i / args.offered if args.offered else now()
+        if args.behind and not i & 1023 and now() - stamp >= args.behind:
+            break
         pub.publish("SEQ", float(i), time=stamp)
         stamps.append(stamp)
         i += 1
@@ -198,13 +202,21 @@ def read_alog(path: Path) -> tuple[dict[int, float], int]:
 
 
 def publisher(
-    port: int, stamps: Path, *, rate: float = 0.0, offered: float = 0.0, n: int = 10**9
+    port: int,
+    stamps: Path,
+    *,
+    rate: float = 0.0,
+    offered: float = 0.0,
+    n: int = 10**9,
+    behind: float = 0.0,
 ) -> Helper:
     args = ["--connect", f"tcp/127.0.0.1:{port}", "--stamps", str(stamps), "-n", str(n)]
     if rate:
         args += ["--rate", str(rate)]
     if offered:
         args += ["--offered", str(offered)]
+    if behind:
+        args += ["--behind", str(behind)]
     helper = Helper("pub", args, script=HERE)
     helper.read()
     return helper
@@ -272,18 +284,18 @@ def one_kill(tmp: Path, compress: str, rate: float, label: str, k: int) -> dict[
     return {"window": window, "buffered": buffered, "rate": write_rate, "published": len(stamps)}
 
 
-def overload(tmp: Path, lf: float, seconds: float) -> dict[str, Any]:
+def overload(tmp: Path, lf: float, behind: float) -> dict[str, Any]:
     work = tmp / "overload"
     work.mkdir()
     port = free_port()
     rec = Recorder(work, port, "zstd")
     status = Status(port)
     offered = 3.0 * lf
-    n = int(offered * seconds)
     stamps_file = work / "stamps.bin"
-    pub = publisher(port, stamps_file, offered=offered, n=n)
+    pub = publisher(port, stamps_file, offered=offered, behind=behind)
     pub.send("go")
     done = pub.read(timeout=600)
+    n = int(done["n"])
     worst_lag = 0.0
     while True:
         got = status.get()
@@ -305,7 +317,8 @@ def overload(tmp: Path, lf: float, seconds: float) -> dict[str, Any]:
         "offered": offered,
         "n": n,
         "published_in": done["t1"] - done["t0"],
-        "behind": (done["t1"] - done["t0"]) - (n / offered),
+        "taken_rate": n / (done["t1"] - done["t0"]),
+        "behind_at_end": (done["t1"] - done["t0"]) - (n / offered),
         "on_disk": len(seqs),
         "worst_time_error": max(errors) if errors else float("nan"),
         "skewed": body.get("skewed"),
@@ -317,7 +330,9 @@ def overload(tmp: Path, lf: float, seconds: float) -> dict[str, Any]:
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--kills", type=int, default=3, help="kills per compression and rate")
-    parser.add_argument("--overload", type=float, default=10.0, help="seconds of offered schedule")
+    parser.add_argument(
+        "--behind", type=float, default=8.0, help="overload until stamps lag this (s)"
+    )
     parser.add_argument("--skip-kills", action="store_true")
     args = parser.parse_args()
     print(f"load before: {loadavg()}", flush=True)
@@ -345,7 +360,7 @@ def main() -> int:
                         f"| {buffered:.2f} s | {published:,.0f} |",
                         flush=True,
                     )
-        result = overload(tmp, lf, args.overload)
+        result = overload(tmp, lf, args.behind)
         print(f"\noverload: {json.dumps(result, indent=1)}")
     print(f"load after: {loadavg()}")
     return 0

@@ -100,6 +100,14 @@ def fleet(
             problem = version_problem(vehicle, found.wire)
             if problem is not None:
                 warn(problem)
+    for vehicle in view.names:
+        for info in latest.get(vehicle, []):
+            if info is not None and info.synced is False and info.session is not None:
+                print(
+                    f"fleetlog: warning: {vehicle}'s clock was not synchronised when its"
+                    f" latest session {info.session} opened: its absolute times may be off",
+                    file=sys.stderr,
+                )
     if as_json:
         for vehicle in view.names:
             answers = latest.get(vehicle, [])

@@ -19,7 +19,7 @@ from fleetlog.cli.options import (
     checked_vehicle,
 )
 from fleetlog.cli.shore import WAIT, Wait, open_client, warn
-from fleetlog.cli.tables import console, sessions_table
+from fleetlog.cli.tables import clock_warning, console, sessions_table
 from fleetlog.wire.query import LatestInfo
 
 __all__ = ["sessions"]
@@ -79,6 +79,10 @@ def sessions(
             f"vehicle {vehicle}: {len(found)} processes answer ({', '.join(map(str, found))});"
             " two recorders of one vehicle (a partition that healed?)"
         )
+    unsynced = [s.name for infos in found.values() for s in infos if s.synced is False]
+    warning = clock_warning(vehicle, unsynced)
+    if warning is not None:
+        warn(warning)
     for zid, infos in found.items():
         info = latest.get(zid)
         newest = info.session if info is not None else None

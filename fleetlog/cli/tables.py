@@ -102,6 +102,8 @@ def fleet_table(
                 row = [vehicle, services, "(no session)", "-", "-"]
             else:
                 state = "writing" if info.writing else "complete"
+                if info.synced is False:
+                    state += " (clock not synced)"
                 row = [vehicle, services, info.session, state, human_time(info.start)]
             if conflict:
                 many = len(answers) > 1
@@ -124,6 +126,29 @@ def sessions_table(sessions: list[SessionInfo], latest: str | None) -> Table:
             "-" if info.variables is None else str(info.variables),
             str(len(info.files)),
             human_size(info.size),
-            "complete" if info.complete else "writing",
+            session_state(info),
         )
     return table
+
+
+def session_state(info: SessionInfo) -> str:
+    """``writing``, ``closed``, ``cut`` (its recorder died), or ``complete`` (no metadata)."""
+    if not info.complete:
+        text = "writing"
+    elif info.state in ("closed", "cut"):
+        text = info.state
+    else:
+        text = "complete"
+    return text + (" (clock not synced)" if info.synced is False else "")
+
+
+def clock_warning(vehicle: str, unsynced: list[str]) -> str | None:
+    """The warning for sessions recorded on a clock that was not synchronised, if any."""
+    if not unsynced:
+        return None
+    some = ", ".join(unsynced[:3]) + (f" and {len(unsynced) - 3} more" if len(unsynced) > 3 else "")
+    return (
+        f"{vehicle}'s clock was not synchronised when {len(unsynced)} session(s) opened"
+        f" ({some}): their absolute times may be off, and merging them with other vehicles"
+        " by time may mislead"
+    )

@@ -434,7 +434,17 @@ class LogCatalog:
             start = head.banner.logstart if head.banner else None
         except StorageError:
             pass
-        return LatestInfo(self.vehicle, name, not self.is_complete(name), how, hint, start)
+        meta = self._meta(name)
+        synced = meta.clock.get("synchronized") if meta is not None else None
+        return LatestInfo(
+            self.vehicle,
+            name,
+            not self.is_complete(name),
+            how,
+            hint,
+            start,
+            synced=synced if isinstance(synced, bool) else None,
+        )
 
     def guess_vehicle(self) -> str | None:
         """Return the community that wrote the latest session, if it says (for ``serve``).

@@ -317,6 +317,8 @@ class LatestInfo:
         server: the Zenoh id of the process that answered.
         recorder: the Zenoh id of the vehicle's recorder, when the recorder answered (None
             for ``fleetlog serve``).
+        synced: whether the recording host's clock was synchronised when the session
+            opened (session metadata), None when unknown.
     """
 
     vehicle: str
@@ -328,6 +330,7 @@ class LatestInfo:
     server: str | None = None
     recorder: str | None = None
     wire: int = WIRE_VERSION
+    synced: bool | None = None
 
     def to_json(self) -> bytes:
         """Return the reply bytes."""
@@ -342,6 +345,7 @@ class LatestInfo:
                 "server": self.server,
                 "recorder": self.recorder,
                 "wire": self.wire,
+                "synced": self.synced,
             }
         )
 
@@ -366,6 +370,7 @@ class LatestInfo:
             _opt(obj, "server", str, what),
             _opt(obj, "recorder", str, what),
             version_of(obj),
+            _opt(obj, "synced", bool, what),
         )
 
 
