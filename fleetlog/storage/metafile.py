@@ -222,13 +222,23 @@ def _alive_by_process(meta: SessionMeta) -> bool:
     return True
 
 
+def _foreign(meta: SessionMeta | None) -> bool:
+    """A session written on another host (fetched while open, say): only that host can tell."""
+    return meta is not None and bool(meta.host) and meta.host != host_name()
+
+
 def recorder_alive(directory: Path, meta: SessionMeta | None = None) -> bool:
     """Return True if a live recorder holds ``directory`` (an ``open`` session's directory).
 
+    A session another host wrote counts as alive: its lock is not here to ask (a copy
+    fetched while it was being written is not cut).
+
     Args:
         directory: the session directory.
-        meta: its metadata, for the fallback where ``flock`` is not supported.
+        meta: its metadata, for the host and the fallback where ``flock`` is not supported.
     """
+    if _foreign(meta):
+        return True
     taken, fd = _lock_state(directory, fcntl.LOCK_SH)
     if fd is not None:
         os.close(fd)
@@ -241,7 +251,8 @@ def mark_cut_sessions(log_root: Path, now: float) -> list[SessionMeta]:
     """Mark ``cut`` every session under ``log_root`` left ``open`` by a recorder that died.
 
     Each is checked and marked under its directory's lock, so a recorder that is alive (or
-    one that starts at the same moment) is never marked. Unreadable sessions are skipped.
+    one that starts at the same moment) is never marked. Unreadable sessions, and sessions
+    another host wrote (copies fetched while open), are left alone.
 
     Returns:
         The new metadata of the sessions marked, oldest name first.
@@ -258,7 +269,7 @@ def mark_cut_sessions(log_root: Path, now: float) -> list[SessionMeta]:
             meta = read_meta(directory)
         except (StorageError, FormatError):
             continue
-        if meta is None or meta.state != OPEN:
+        if meta is None or meta.state != OPEN or _foreign(meta):
             continue
         taken, fd = _lock_state(directory, fcntl.LOCK_EX)
         try:

@@ -171,3 +171,12 @@ def test_acks_are_appended_after_checking_session_and_files(tmp_path: Path) -> N
     with pytest.raises(StorageError, match="no session 'link'"):
         append_ack(tmp_path, "link", {"S1.alog": DIGEST}, now=7.0)
     assert len((tmp_path / ACKS_NAME).read_text().splitlines()) == 2
+
+
+def test_a_session_of_another_host_is_never_cut_here(tmp_path: Path) -> None:
+    fetched = tmp_path / "FETCHED"
+    fetched.mkdir()
+    write_meta(fetched, replace(meta("FETCHED"), host="another-vehicle"))
+    assert recorder_alive(fetched, read_meta(fetched))
+    assert mark_cut_sessions(tmp_path, now=5.0) == []
+    assert read_meta(fetched).state == "open"  # type: ignore[union-attr]

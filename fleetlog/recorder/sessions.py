@@ -1,0 +1,643 @@
+"""The recorder's sessions: opening and closing them, their metadata, and surviving the disk.
+
+:class:`SessionKeeping` is the half of :class:`~fleetlog.recorder.engine.Recorder` that owns
+the open :class:`~fleetlog.storage.session.SessionWriter`: the first session (after marking
+the sessions a dead recorder left open as cut), LOGGER_RESTART, clean close, the session
+metadata (``.fleetlog-session.json``, written off the recording thread), and what happens
+when the disk fails: pLogger's fallback, a session directory removed under it, a full or
+read-only file system and the automatic new session once writing works again, with every
+loss counted and marked (``PLOGGER_GAP``, docs/compat.md). The other half, what to log and
+how, is in :mod:`fleetlog.recorder.engine`.
+
+Its state lives in two small groups (:class:`Health`, :class:`MetaState`) rather than on the
+Recorder: CPython keeps at most 30 attributes of an object inline, and the hot path reads
+the Recorder's (docs/reliability.md).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import dataclasses
+import os
+import time
+import uuid
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from fleetlog import __version__
+from fleetlog.errors import FleetlogError, StorageError
+from fleetlog.moos.alog import LineFormatter, Variant
+from fleetlog.moos.mission import LoggerConfig
+from fleetlog.moos.slog import SlogTable, SlotPatch
+from fleetlog.recorder.clocksync import clock_state
+from fleetlog.recorder.losses import LossLedger, reason_of
+from fleetlog.recorder.stats import COUNTER_FIELDS, RecorderStats
+from fleetlog.storage.metafile import mark_cut_sessions
+from fleetlog.storage.session import SessionLayout, SessionWriter
+from fleetlog.wire.control import Outcome
+from fleetlog.wire.session_meta import CLOSED, MAX_GAPS, OPEN, Gap, SessionMeta
+
+__all__ = ["Background", "Health", "MetaState", "SessionKeeping", "inline"]
+
+#: the session metadata is rewritten at most this often while counters change
+META_INTERVAL = 2.0
+#: losses that did not break the session (DROP publishers', unreadable keys) are marked in
+#: the alog at most this often
+GAP_INTERVAL = 1.0
+#: with no session open, opening one is retried after this long (doubling up to the maximum)
+RETRY_FIRST = 1.0
+RETRY_MAX = 8.0
+#: a file system with less free space than this is not worth a retry yet
+MIN_FREE_BYTES = 1 << 20
+#: notes one session may hold
+MAX_NOTES = 64
+
+#: runs file work the drain thread must not wait for (fsync, metadata) in order, elsewhere
+Background = Callable[[Callable[[], None]], None]
+
+
+def inline(job: Callable[[], None]) -> None:
+    """Run ``job`` now (the default: tests and embedding without a background thread)."""
+    job()
+
+
+@dataclass
+class Health:
+    """How writing goes: failures, retries, lag, fsync (cold state, kept off the Recorder).
+
+    The Recorder itself keeps at most 30 attributes: CPython 3.11 keeps an instance's
+    attributes inline (fast ``self.x`` in the hot path) only up to that many; past it every
+    attribute read in :meth:`Recorder.handle` got 15 % slower (measured, docs/reliability.md).
+    """
+
+    #: why no session is open after a failure (None while writing works)
+    broken: str | None = None
+    retry_at: float = 0.0
+    retry_wait: float = 1.0
+    #: the longest a line waited between arrival and the OS, this status period and the last
+    lag: float = 0.0
+    last_lag: float = 0.0
+    #: fsync: when the last one finished (epoch), the longest it took, the next, one running
+    synced_at: float | None = None
+    max_fsync: float = 0.0
+    sync_due: float = 0.0
+    sync_running: bool = False
+    #: when losses were last marked in the alog
+    gaps_at: float = 0.0
+    #: samples the transport may hold before the recorder takes them (set by the service)
+    queue: int | None = None
+    #: the open session is the recorder's own fallback after a write error
+    in_fallback: bool = False
+    #: keys already reported as naming no variable
+    unreadable: set[str] = field(default_factory=set)
+    #: samples lost on the way per publisher (its Zenoh id), not yet on MOOS_DEBUG
+    missed: dict[str, int] = field(default_factory=dict)
+
+
+@dataclass
+class MetaState:
+    """The open session's metadata and what it is built from."""
+
+    recorder_id: str
+    host: str
+    boot: str
+    meta: SessionMeta | None = None
+    counters_at_open: dict[str, int] = field(default_factory=dict)
+    #: when the metadata was last rewritten
+    meta_at: float = 0.0
+    meta_counters: dict[str, int] = field(default_factory=dict)
+    #: sessions found cut at start, marked by the first session's first entries
+    cut_sessions: list[SessionMeta] = field(default_factory=list)
+
+
+class SessionKeeping:
+    """The session half of the Recorder (a mixin: the Recorder sets what it uses)."""
+
+    # What it uses of the Recorder (set by Recorder.__init__).
+    config: LoggerConfig
+    session: SessionWriter | None
+    stats: RecorderStats
+    logstart: float
+    losses: LossLedger
+    synclog: SlogTable | None
+    app_name: str
+    vehicle: str
+    mission_path: Path | None
+    _clock: Callable[[], float]
+    _cwd: Path
+    _background: Background
+    _h: Health
+    _m: MetaState
+    _unflushed_since: float | None
+    _fmt: LineFormatter
+
+    def debug(self, text: str) -> None:
+        """Post a MOOS_DEBUG message (the Recorder's)."""
+        raise NotImplementedError
+
+    def post(self, name: str, value: float | str) -> None:
+        """Publish a message as pLogger (the Recorder's)."""
+        raise NotImplementedError
+
+    def status_text(self, now: float) -> str:
+        """Return the PLOGGER_STATUS text (the Recorder's)."""
+        raise NotImplementedError
+
+    def flush(self) -> None:
+        """Hand what was written to the OS (the Recorder's)."""
+        raise NotImplementedError
+
+    def _write_slog(self, text: str, patch: SlotPatch | None = None) -> None:
+        raise NotImplementedError
+
+    @property
+    def broken(self) -> str | None:
+        """Why no session is open after a failure (None while writing works)."""
+        return self._h.broken
+
+    @property
+    def synced_at(self) -> float | None:
+        """When the open session's files were last fsynced (epoch)."""
+        return self._h.synced_at
+
+    @property
+    def meta(self) -> SessionMeta | None:
+        """The open session's metadata."""
+        return self._m.meta
+
+    @property
+    def cut_sessions(self) -> list[SessionMeta]:
+        """The sessions found cut when the recorder started."""
+        return self._m.cut_sessions
+
+    @property
+    def queue(self) -> int | None:
+        """Samples the transport may hold before the recorder takes them."""
+        return self._h.queue
+
+    @queue.setter
+    def queue(self, value: int | None) -> None:
+        self._h.queue = value
+
+    # ---------------------------------------------------------------------------------------
+    # Sessions
+
+    def layout(self) -> SessionLayout:
+        """Return the session layout the configuration describes."""
+        cfg = self.config
+        return SessionLayout(
+            file=cfg.file,
+            path=cfg.path,
+            timestamp=cfg.file_timestamp,
+            utc=cfg.utc_log_directories,
+            variant=Variant.EM if cfg.variant == "em" else Variant.IVP,
+            compression=cfg.compress_alogs,
+            sync_log=cfg.sync_log,
+            exclusion_log=cfg.wildcard_exclusion_log,
+            mark_data_type=cfg.mark_data_type,
+            summary_file=cfg.logging_directory_summary_file,
+            mission_path=self.mission_path,
+            helm_task_file=cfg.helm_task_file,
+        )
+
+    @property
+    def log_root(self) -> Path:
+        """The directory the sessions are created in (pLogger's ``Path``)."""
+        path = Path(self.config.path)
+        return path if path.is_absolute() else self._cwd / path
+
+    def current_session_name(self) -> str | None:
+        """Return the open session's directory name (any thread)."""
+        session = self.session
+        return session.root if session is not None else None
+
+    def start(self) -> SessionWriter:
+        """Mark the sessions a dead recorder left open as cut, open the first session.
+
+        Raises:
+            StorageError: no session directory could be created at all.
+        """
+        self._m.cut_sessions = mark_cut_sessions(self.log_root, self._clock())
+        session = self._open_session()
+        for cut in self._m.cut_sessions:
+            # A crash's gap is the first entry of the next session.
+            self.gap(Gap(self._clock(), "crash", None, cut.updated, self.logstart, {}, cut.session))
+        if self._m.cut_sessions:
+            self.flush()  # the mark reaches the OS now, not with the first sample
+        return session
+
+    def _open_session(self, path: str | None = None) -> SessionWriter:
+        now = self._clock()
+        layout = self.layout()
+        if path is not None:
+            layout = dataclasses.replace(layout, path=path)
+        session = SessionWriter.open(layout, self.logstart, when=now, cwd=self._cwd)
+        self.session = session
+        self._h.in_fallback = path is not None
+        self._unflushed_since = None
+        self.stats.sessions += 1
+        self._m.counters_at_open = self._counters()
+        self._m.meta = SessionMeta(
+            state=OPEN,
+            vehicle=self.vehicle,
+            session=session.root,
+            recorder=self._m.recorder_id,
+            fleetlog=__version__,
+            opened=now,
+            logstart=self.logstart,
+            updated=now,
+            mission_id=uuid.uuid4().hex,
+            part=1,
+            counters=self._session_counters(),
+            clock=clock_state(now),
+            host=self._m.host,
+            pid=os.getpid(),
+            boot=self._m.boot,
+        )
+        # Visible at once (without waiting for the disk), so the session is never without
+        # its state; made durable by the background writer right after.
+        try:
+            session.write_meta(self._m.meta.to_bytes(), durable=False)
+        except StorageError as err:
+            self._background_failed(err)
+        self._write_meta(session, self._m.meta)
+        self._h.broken = None
+        self._h.retry_wait = RETRY_FIRST
+        self._h.sync_due = now + self.config.fsync_interval
+        if session.fallback:
+            self.debug(
+                f"could not create {self.config.path}/{session.root}: "
+                f"logging to the fallback {session.directory}"
+            )
+        for warning in session.warnings:
+            self.debug(warning)
+        if self.synclog is not None and session.slog is not None:
+            text = self.synclog.start(session.banner(".slog", now), now - self.logstart)
+            self._write_slog(text)
+        self.post("LOGGER_DIRECTORY", session.directory)
+        # Posted at once (not only every 2 s): its Community field names the vehicle in a
+        # session that has no mission copy and no MOOSDB's DB_TIME (replay, serve read it).
+        self.post(self.app_name.upper() + "_STATUS", self.status_text(now))
+        # What was lost while no session was open is this session's first entries.
+        self._write_gaps(now)
+        return session
+
+    def restart(self) -> Outcome:
+        """Close the current session and open a new one (LOGGER_RESTART, §6.3 with §12's fixes).
+
+        Every file is reopened (xlog and blog too), LOGSTART starts afresh, and a
+        time-stamped directory is never reused.
+        """
+        # The fresh LOGSTART is taken first: the Closing notice comes back after the new
+        # session opened, and a stamp before LOGSTART would count it as skewed.
+        self.logstart = self._clock()
+        old = self.session
+        if old is not None:
+            self.debug(f"Closing : {Path(old.directory).name}")
+            self._close_session()
+        new: SessionWriter | None
+        try:
+            new = self._open_session()
+        except StorageError as err:
+            self._storage_failed(err, lost=0)
+            new = self._open_fallback()
+            if new is None:
+                self._set_broken(reason_of(err), self._clock())
+        if new is not None:
+            self.debug(f"Now Logging to : {Path(new.directory).name}")
+            return Outcome.done(
+                "restart", f"started session {new.root}", session=new.root, directory=new.directory
+            )
+        return Outcome.refused("restart", f"no session could be opened: {self.stats.last_error}")
+
+    def _close_session(self) -> None:
+        session = self.session
+        if session is None:
+            return
+        self._unflushed_since = None
+        try:
+            session.close()
+        except StorageError as err:
+            # What close could not write is lost; the session is dropped either way.
+            self.session = None
+            self._count_unwritten(session, reason_of(err), self._clock())
+            self._storage_failed(err, lost=0, fallback=False)
+        self.session = None
+        self._finish(session)
+
+    def _finish(self, session: SessionWriter) -> None:
+        """Sync a closed session's files and write its last metadata, off this thread."""
+        meta = self._m.meta
+        self._m.meta = None
+        final = None
+        if meta is not None:
+            final = dataclasses.replace(meta, counters=self._session_counters()).with_state(
+                CLOSED, self._clock()
+            )
+
+        def finish() -> None:
+            try:
+                session.finish(final)
+            except StorageError as err:
+                self._background_failed(err)
+
+        if session.layout.timestamp:
+            self._background(finish)
+        else:
+            finish()  # the next session reuses the directory: its lock must be free first
+
+    def stop(self) -> None:
+        """Flush and close everything (clean shutdown)."""
+        self._close_session()
+
+    # ---------------------------------------------------------------------------------------
+    # Session metadata
+
+    def _counters(self) -> dict[str, int]:
+        stats = self.stats
+        return {name: getattr(stats, name) for name in COUNTER_FIELDS}
+
+    def _session_counters(self) -> dict[str, int]:
+        base = self._m.counters_at_open
+        return {k: v - base.get(k, 0) for k, v in self._counters().items()}
+
+    def _write_meta(self, session: SessionWriter, meta: SessionMeta) -> None:
+        data = meta.to_bytes()
+
+        def write() -> None:
+            if session.closed:
+                return  # its final version is written by finish
+            try:
+                session.write_meta(data)
+            except StorageError as err:
+                self._background_failed(err)
+
+        self._background(write)
+
+    def _update_meta(self, now: float, **changes: Any) -> None:
+        """Rewrite the open session's metadata with the current counters (and ``changes``)."""
+        session, meta = self.session, self._m.meta
+        if session is None or meta is None:
+            return
+        counters = self._session_counters()
+        self._m.meta_counters = counters
+        self._m.meta = dataclasses.replace(meta, counters=counters, updated=now, **changes)
+        self._m.meta_at = now
+        self._write_meta(session, self._m.meta)
+
+    def _background_failed(self, err: StorageError) -> None:
+        """Report a failed fsync or metadata write (from the background thread)."""
+        self.stats.write_errors += 1
+        self.stats.last_error = str(err)
+        self.debug(f"write error: {err}")
+
+    def gap(self, gap: Gap) -> None:
+        """Mark a loss where it is noticed: a ``PLOGGER_GAP`` entry and a metadata gap."""
+        session = self.session
+        if session is None:
+            return
+        now = self._clock()
+        offset = max(now - self.logstart, 0.0)
+        line = self._fmt.string(offset, "PLOGGER_GAP", self.app_name, gap.moos_text())
+        try:
+            session.alog.write(line)
+        except StorageError as err:
+            self._storage_failed(err, lost=0)
+            return
+        if self._unflushed_since is None:
+            self._unflushed_since = now
+        meta = self._m.meta
+        if meta is not None:
+            gaps = meta.gaps if len(meta.gaps) < MAX_GAPS else meta.gaps[1:]
+            self._update_meta(now, gaps=(*gaps, gap))
+
+    def note(self, key: str, value: str) -> Outcome:
+        """Set a note on the open session (its metadata's ``notes``)."""
+        meta = self._m.meta
+        if meta is None or self.session is None:
+            return Outcome.refused("note", "no session is open")
+        if not key.strip() or any(ord(c) < 32 for c in key):
+            return Outcome.refused("note", "a note's key must be printable text")
+        if key not in meta.notes and len(meta.notes) >= MAX_NOTES:
+            return Outcome.refused("note", f"a session holds at most {MAX_NOTES} notes")
+        self._update_meta(self._clock(), notes={**meta.notes, key: value})
+        return Outcome.done("note", f"noted {key} on session {self.session.root}")
+
+    def _storage_failed(self, err: FleetlogError, *, lost: int, fallback: bool = True) -> None:
+        """Count, report and fall back: a full or read-only disk must not stop the recorder.
+
+        Args:
+            err: what went wrong.
+            lost: samples in hand that were not written, besides the lines the session's
+                streams count as never written (those are counted here, by variable).
+            fallback: drop the broken session and try pLogger's fallback (the working
+                directory); False when the session is being closed anyway (it is passed
+                as ``self.session`` is already cleared, see :meth:`_close_session`).
+        """
+        stats = self.stats
+        reason = reason_of(err)
+        session = self.session
+        now = self._clock()
+        if session is not None and fallback:
+            self.session = None
+            self._unflushed_since = None
+            with contextlib.suppress(StorageError):
+                session.close()  # writes what it can of the other streams
+            self._count_unwritten(session, reason, now)
+        root = session.root if session is not None else ""
+        stats.lost += lost
+        stats.write_errors += 1
+        first = stats.last_error != str(err)
+        stats.last_error = str(err)
+        self.losses.add(reason, lost, now, session=root)
+        if first:
+            self.debug(f"write error, samples are being lost: {err}")
+        if session is None or not fallback:
+            return
+        self._finish(session)
+        if session.fallback or self._h.in_fallback or self._open_fallback() is None:
+            # Nothing left to fall back to: samples are counted as lost, and a new session
+            # opens by itself once the disk takes writes again (or at a LOGGER_RESTART).
+            self._set_broken(reason, now)
+
+    def _count_unwritten(self, session: SessionWriter, reason: str, now: float) -> None:
+        """Count as lost, by variable, the lines a failed session never wrote."""
+        for name, count in session.take_unwritten().items():
+            self.stats.lost += count
+            self.losses.add(reason, count, now, name=name, session=session.root)
+
+    def _set_broken(self, reason: str, now: float) -> None:
+        self._h.broken = reason
+        self._h.retry_at = now + self._h.retry_wait
+        self.debug(
+            f"no session is open ({reason}): samples are being lost until writing works again"
+        )
+
+    def _session_removed(self, session: SessionWriter, now: float) -> None:
+        """The session's directory (or its alog) was removed while recording: carry on.
+
+        A new session opens at once with the same LOGSTART, so the lines not yet handed to
+        the OS move into it unchanged (what the OS had went with the directory: the
+        operator removed it). A binary line cannot move (its record went to the removed
+        blog): it is counted lost.
+        """
+        stats = self.stats
+        stats.write_errors += 1
+        stats.last_error = f"the session directory {session.directory} was removed"
+        pending = session.take_pending()
+        self.session = None
+        self._unflushed_since = None
+        with contextlib.suppress(StorageError):
+            session.close()
+        self._m.meta = None  # nowhere to write its last version
+        if session.lock is not None:
+            session.lock.release()
+        lost = 0
+
+        def drop(line: str) -> None:
+            nonlocal lost
+            lost += 1
+            fields = line.split(None, 2)
+            name = fields[1] if len(fields) > 1 else None
+            self.losses.add("removed", 1, now, name=name, session=session.root)
+
+        samples = ("alog", "xlog")  # one line per sample; the ylog repeats alog lines
+        for kind in samples:
+            kept = []
+            for line in pending.get(kind, ()):
+                if "<MOOS_BINARY>" in line:
+                    drop(line)
+                else:
+                    kept.append(line)
+            pending[kind] = kept
+        self.losses.add("removed", 0, now, session=session.root, always=True)
+        try:
+            new: SessionWriter | None = self._open_session()
+        except StorageError as err:
+            new = None
+            stats.last_error = str(err)
+        moved = 0
+        for kind, lines in pending.items():
+            stream = None if new is None else getattr(new, kind)
+            for line in lines:
+                if stream is not None:
+                    stream.write(line)
+                    moved += 1
+                elif kind in samples:
+                    drop(line)
+        stats.lost += lost
+        if moved and self._unflushed_since is None:
+            self._unflushed_since = now
+        self.debug(
+            f"the session directory {session.directory} was removed while recording: "
+            f"now logging to {new.directory if new else 'nothing'} ({lost} samples lost)"
+        )
+        if new is None:
+            self._set_broken("removed", now)
+
+    def _retry(self, now: float) -> None:
+        """With no session open after a failure: open one if the disk takes writes again.
+
+        The file system is asked every second (statvfs: read-only? space?); an attempt that
+        still fails waits twice as long before the next, up to 8 s.
+        """
+        self._h.retry_at = now + RETRY_FIRST
+        if not _writable(self.log_root):
+            return
+        self.logstart = now
+        try:
+            session = self._open_session()
+        except StorageError as err:
+            self.stats.last_error = str(err)
+            self._h.retry_wait = min(self._h.retry_wait * 2, RETRY_MAX)
+            self._h.retry_at = now + self._h.retry_wait
+            return
+        self.debug(f"writing works again: now logging to {session.directory}")
+
+    def _write_gaps(self, now: float) -> None:
+        self._h.gaps_at = now
+        for gap in self.losses.take(now):
+            self.gap(gap)
+
+    def _sync(self, now: float) -> None:
+        """Sync the open session's files in the background, one at a time (FsyncInterval)."""
+        self._h.sync_due = now + self.config.fsync_interval
+        session = self.session
+        if session is None or self._h.sync_running:
+            return
+        self._h.sync_running = True
+
+        def sync() -> None:
+            started = time.monotonic()
+            try:
+                session.sync()
+            except StorageError as err:
+                self._background_failed(err)
+            else:
+                self._h.synced_at = now
+                self._h.max_fsync = max(self._h.max_fsync, time.monotonic() - started)
+            finally:
+                self._h.sync_running = False
+
+        self._background(sync)
+
+    def _session_tick(self, now: float) -> None:
+        """The session's timers: retry after a failure, removal, gaps, fsync, metadata."""
+        session = self.session
+        if session is None:
+            if self._h.broken is not None and now >= self._h.retry_at:
+                self._retry(now)
+        elif session.removed():
+            # Noticed while idle too, before the next samples would go to unlinked files.
+            self._session_removed(session, now)
+        else:
+            if self.losses and now - self._h.gaps_at >= GAP_INTERVAL:
+                self._write_gaps(now)
+            if self.config.fsync_interval > 0 and now >= self._h.sync_due:
+                self._sync(now)
+        if now - self._m.meta_at >= META_INTERVAL and self._m.meta is not None:
+            self._m.meta_at = now
+            if self._session_counters() != self._m.meta_counters:
+                self._update_meta(now)
+
+    def _end_lag_period(self) -> None:
+        """A status period ends: its longest lag becomes the last period's."""
+        session = self.session
+        if session is not None:
+            self._h.lag += session.take_wait()
+        self._h.last_lag, self._h.lag = self._h.lag, 0.0
+
+    def max_lag(self) -> float:
+        """Return the longest a line waited from arrival to readable on disk, lately.
+
+        Readable: handed to the OS (plain), in a complete unit (compressed: the arrival →
+        flush and flush → unit maxima are added, an upper bound); over the last 2-4 s.
+        """
+        return max(self._h.lag, self._h.last_lag)
+
+    def _open_fallback(self) -> SessionWriter | None:
+        """Open a session in the working directory (pLogger's fallback) and announce it."""
+        try:
+            session = self._open_session(path=".")
+        except StorageError as err:
+            self.stats.last_error = str(err)
+            self.debug(f"fallback failed too, samples are being lost: {err}")
+            return None
+        self.debug(f"now logging to the fallback {session.directory}")
+        return session
+
+
+def _writable(path: Path) -> bool:
+    """Return True unless ``path``'s file system is read-only or (nearly) full.
+
+    A directory that no longer exists may be created again (or its fallback used): True.
+    """
+    try:
+        st = os.statvfs(path)
+    except OSError:
+        return True
+    if st.f_flag & os.ST_RDONLY:
+        return False
+    return st.f_bavail * st.f_frsize >= MIN_FREE_BYTES
