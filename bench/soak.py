@@ -149,7 +149,9 @@ def main() -> int:
         while "recording" not in (line := rec.stderr.readline()):
             if not line:
                 raise RuntimeError("the recorder did not start")
-        threading.Thread(target=rec.stderr.read, daemon=True).start()  # keep the pipe drained
+        err_tail: list[str] = []
+        stderr = rec.stderr
+        threading.Thread(target=lambda: err_tail.extend(stderr), daemon=True).start()
         stamps = tmp / "stamps.bin"
         pub = Helper(
             "pub",
@@ -227,7 +229,9 @@ def main() -> int:
             with AlogReader(session / f"{session.name}.alog", errors="skip") as reader:
                 for record in reader.records():
                     if record.entry.key == "SEQ":
-                        i = int(record.entry.value)  # type: ignore[arg-type]
+                        # The first token: a garbage name with bytes readers do not take
+                        # for a key makes its line read as the previous value's next line.
+                        i = int(float(str(record.entry.value).split()[0]))
                         duplicates += seen[i]
                         seen[i] = 1
         missing = len(published) - sum(seen)
@@ -256,6 +260,7 @@ def main() -> int:
         }
         print(json.dumps(result, indent=1))
         print(f"load after: {loadavg()}")
+        print(f"recorder stderr (last lines): {''.join(err_tail[-5:])!r}")
         ok = missing == 0 and duplicates == 0 and set(states) == {"closed"}
         ok &= set(reasons) <= {"unreadable"}
         return 0 if ok else 1
