@@ -126,6 +126,9 @@ def main() -> int:
     parser.add_argument("--minutes", type=float, default=10.0)
     parser.add_argument("--rate", type=float, default=20_000.0)
     parser.add_argument("--restart", type=float, default=60.0)
+    parser.add_argument("--no-fetch", action="store_true", help="(to attribute memory)")
+    parser.add_argument("--no-grep", action="store_true", help="(to attribute memory)")
+    parser.add_argument("--no-garbage", action="store_true", help="(to attribute memory)")
     args = parser.parse_args()
     from fleetlog.api import Vehicle
     from fleetlog.storage.readers import AlogReader
@@ -174,13 +177,18 @@ def main() -> int:
             return cli("query", VEHICLE, "SEQ", "--limit", "1000", endpoint=endpoint, cwd=tmp) == 0
 
         loops = [Loop(fetch), Loop(grep)]
+        if args.no_fetch:
+            loops[0].halt.set()
+        if args.no_grep:
+            loops[1].halt.set()
         garbage: dict[str, int] = {}
         halt = threading.Event()
         bad = threading.Thread(target=hostile, args=(endpoint, halt, garbage), daemon=True)
         pub.send("go")
         for loop in loops:
             loop.start()
-        bad.start()
+        if not args.no_garbage:
+            bad.start()
         samples: list[tuple[float, int, dict[str, Any]]] = []
         started = time.monotonic()
         next_restart = started + args.restart
@@ -207,7 +215,8 @@ def main() -> int:
             loop.halt.set()
         for loop in loops:
             loop.join(180)
-        bad.join(30)
+        if bad.is_alive():
+            bad.join(30)
         ops.close()
         shore.close()
         pub.finish()
