@@ -62,6 +62,11 @@ MAX_REQUEST_SUBSCRIBERS = 32
 QUEUE = 8192
 #: no subscriber's FIFO holds fewer samples than this
 _MIN_FIFO = 512
+#: the FIFO of a subscription to the command variables alone (PLOGGER_CMD, LOGGER_RESTART):
+#: outside the queue bound, because samples from one link reach every FIFO through one Zenoh
+#: thread, and a flood of commands that filled a small FIFO would hold back the data behind
+#: it (tests/recorder/test_hostile.py); commands are rare otherwise
+COMMAND_QUEUE = 65536
 _FLUSH_DELAY = 0.005
 _TICK = 0.02
 #: inside a long drain batch, whether a flush is due is checked every this many samples
@@ -169,8 +174,10 @@ class RecorderService:
         self._beats: _Fifo | None = None
         #: when every subscriber was last seen empty (monotonic)
         self._drained_at = 0.0
-        #: each subscriber's FIFO capacity
+        #: each data subscriber's FIFO capacity
         self._fifo = max(_MIN_FIFO, options.queue)
+        #: the key chunks of the command variables (their FIFO is COMMAND_QUEUE)
+        self._command_chunks: set[str] = set()
 
     def stop(self) -> None:
         """Ask the service to finish (safe from a signal handler or another thread)."""
@@ -184,7 +191,8 @@ class RecorderService:
             # for a variable a wildcard pattern already brings in, for example).
             return
         self._chunks.add(chunk)
-        sub = declare_fifo_subscriber(self._session, self._var_prefix + chunk, self._fifo)
+        capacity = COMMAND_QUEUE if chunk in self._command_chunks else self._fifo
+        sub = declare_fifo_subscriber(self._session, self._var_prefix + chunk, capacity)
         self._subscribers.append(sub)
 
     def _subscribe_var(self, name: str) -> None:
@@ -247,12 +255,17 @@ class RecorderService:
             )
             self.recorder = recorder
             chunks = self._initial_chunks(recorder)
-            # The queue bound is shared: each FIFO gets its part (a LOG_REQUEST's later one
-            # gets a part too; at most a few are ever added).
-            self._fifo = max(_MIN_FIFO, opts.queue // max(1, len(chunks)))
+            self._command_chunks = {
+                name_to_chunk(recorder.commands.restart_var),
+                name_to_chunk(recorder.commands.command_var),
+            }
+            # The queue bound is shared by the data FIFOs: each gets its part (a LOG_REQUEST's
+            # later one gets a part too; at most a few are ever added).
+            data = [c for c in chunks if c not in self._command_chunks]
+            self._fifo = max(_MIN_FIFO, opts.queue // max(1, len(data)))
             for chunk in chunks:
                 self._subscribe_chunk(chunk)
-            recorder.queue = self._fifo * len(self._subscribers)
+            recorder.queue = self._fifo * max(1, len(data))
             self._beats = declare_fifo_subscriber(session, heartbeat_keys(self._var_prefix + "*"))
             self._refuse_a_second_recorder(session)
             token = declare_token(session, service_key(opts.root, opts.vehicle, "recorder"))
