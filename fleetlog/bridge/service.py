@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import gc
 import threading
 import time
 from collections.abc import Callable
@@ -62,6 +63,9 @@ class BridgeOptions:
         max_packet: the largest MOOS packet accepted (and message posted), in bytes.
         retry: seconds between attempts to reach the MOOSDB.
         wait_first: keep retrying when the MOOSDB is not up at the start (False: fail).
+        freeze_gc: once started, move the start-up objects out of the cyclic GC's reach
+            (``gc.freeze``), as the recorder does: a full collection then does not walk
+            them in the middle of forwarding. Process-wide: leave it off when embedding.
     """
 
     vehicle: str | None = None
@@ -71,6 +75,7 @@ class BridgeOptions:
     max_packet: int = DEFAULT_MAX_PACKET
     retry: float = 1.0
     wait_first: bool = True
+    freeze_gc: bool = True
 
 
 class BridgeService:
@@ -181,6 +186,9 @@ class BridgeService:
             client.maintain(self._moos_up, self._moos_down, self._moos_retry, self.options.retry)
         )
         ticker = asyncio.create_task(self._ticker())
+        if self.options.freeze_gc:
+            gc.collect()
+            gc.freeze()
         try:
             await self._stop.wait()
         finally:
