@@ -80,16 +80,18 @@ class SecureFleet:
 
     # -- processes
 
-    def start_router(self, name: str) -> Proc:
-        """Start the shore's ("shore") or a vehicle's router."""
+    def start_router(self, name: str, zenohd: str | None = None) -> Proc:
+        """Start the shore's ("shore") or a vehicle's router (``zenohd``: the stock one)."""
         where = SHORE if name == "shore" else vehicle_dir(name)
-        proc = Proc(
-            ["router", "-c", str(self.directory / where / "router.json5")],
-            self.directory,
-            self.env(where),
-        )
-        self.procs[f"router:{name}"] = proc
-        proc.wait_for("listening on", timeout=20)
+        config = str(self.directory / where / "router.json5")
+        if zenohd is None:
+            proc = Proc(["router", "-c", config], self.directory, self.env(where))
+            self.procs[f"router:{name}"] = proc
+            proc.wait_for("listening on", timeout=20)
+        else:
+            proc = Proc([zenohd, "-c", config], self.directory, self.env(where), program=True)
+            self.procs[f"router:{name}"] = proc
+            time.sleep(2.0)  # zenohd says nothing we could wait for
         return proc
 
     def start_recorder(self, vehicle: str, *, wait: bool = True) -> Proc:

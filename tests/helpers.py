@@ -48,10 +48,13 @@ def run_cli(
 class Proc:
     """A ``fleetlog`` subprocess whose stderr is read by a thread, killed on close."""
 
-    def __init__(self, args: Sequence[str], cwd: Path, env: dict[str, str]) -> None:
+    def __init__(
+        self, args: Sequence[str], cwd: Path, env: dict[str, str], *, program: bool = False
+    ) -> None:
+        """``fleetlog ARGS``, or with ``program`` the command line ``ARGS`` as it is."""
         self.args = list(args)
         self.proc = subprocess.Popen(
-            fleetlog_cmd(*args),
+            list(args) if program else fleetlog_cmd(*args),
             cwd=cwd,
             env=env,
             stdin=subprocess.DEVNULL,

@@ -2,6 +2,7 @@
 
 from fleetlog.cli import (
     bridge,
+    demo,
     deploy,
     export,
     fetch,
@@ -20,6 +21,7 @@ from fleetlog.cli import (
 
 __all__ = [
     "bridge",
+    "demo",
     "deploy",
     "export",
     "fetch",

@@ -11,13 +11,24 @@ import typer
 from rich.table import Table
 
 from fleetlog.cli.app import app
-from fleetlog.cli.options import Config, Connect, Listen, Mode, NoScouting, Root, checked_vehicle
+from fleetlog.cli.options import (
+    Config,
+    Connect,
+    Listen,
+    Mode,
+    NoScouting,
+    Root,
+    checked_vehicle,
+    session_options,
+)
 from fleetlog.cli.shore import WAIT, Expect, Wait, discover, finish, open_client, warn
 from fleetlog.cli.tables import console, human_size, plain
-from fleetlog.errors import QueryError
+from fleetlog.deploy.check import machine_findings
+from fleetlog.errors import FleetlogError, QueryError
 from fleetlog.shore.client import FleetClient
 from fleetlog.shore.report import FleetReport
 from fleetlog.shore.status import COUNTERS, VehicleStatus, describe_command
+from fleetlog.transport.session import SessionOptions
 from fleetlog.wire.query import RECORDER_TOKEN
 
 __all__ = ["status"]
@@ -199,6 +210,7 @@ def status(
     """
     if vehicle is not None:
         checked_vehicle(vehicle, "VEHICLE")
+    _this_machine(session_options(mode, connect, listen, config, no_multicast_scouting))
     with open_client(
         root, mode, connect, listen, config, no_multicast_scouting, wait=wait
     ) as client:
@@ -206,3 +218,19 @@ def status(
             _one(client, vehicle, as_json)
         else:
             _fleet(client, expect, as_json)
+
+
+def _this_machine(options: SessionOptions) -> None:
+    """This machine's configuration and certificate, on stderr: expiry shows long before."""
+    try:
+        findings = machine_findings(options, dt.datetime.now(dt.UTC))
+    except FleetlogError as err:
+        warn(f"this machine's configuration: {err}")
+        return
+    for finding in findings:
+        if finding.text.startswith(("mode ", "listening on")):
+            continue
+        if finding.level == "ok":
+            print(f"fleetlog: this machine: {finding.text}", file=sys.stderr)
+        else:
+            warn(f"this machine: {finding.text}")

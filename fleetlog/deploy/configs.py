@@ -18,6 +18,7 @@ from fleetlog.wire.access import access_control
 __all__ = [
     "CA_FILE",
     "client_config",
+    "example_configs",
     "router_config",
     "settings_toml",
 ]
@@ -241,3 +242,31 @@ def settings_toml(fleet: Fleet, vehicle: str | None) -> str:
     if vehicle is not None:
         lines.append(f'vehicle = "{vehicle}"')
     return "\n".join(lines) + "\n"
+
+
+def example_configs() -> dict[str, str]:
+    """The configurations of an example fleet, as shipped in deploy/zenoh/ (a test keeps them).
+
+    Vehicles alpha and bravo, a shore at shore.example.org, an operator ann, a replay host
+    sim, files under /etc/fleetlog. Real fleets get theirs from ``fleetlog deploy init``.
+    """
+    fleet = Fleet(
+        name="example",
+        root="fleet",
+        shore=Machine("shore", ["shore.example.org"], zid="5a0e"),
+        vehicles={"alpha": Machine("alpha", zid="a1fa"), "bravo": Machine("bravo", zid="b2a0")},
+        operators=["ann"],
+        replays=["sim"],
+    )
+    base = "/unused"
+    return {
+        "shore-router.json5": router_config(fleet, fleet.shore, base),
+        "vehicle-router.json5": router_config(fleet, fleet.vehicles["alpha"], base),
+        "vehicle-client.json5": client_config(
+            fleet, "vehicles/alpha", "vehicle.pem", "vehicle.key", base
+        ),
+        "shore-client.json5": client_config(fleet, SHORE, "operator.pem", "operator.key", base),
+        "operator-client.json5": client_config(
+            fleet, "operators/ann", "operator.pem", "operator.key", base
+        ),
+    }

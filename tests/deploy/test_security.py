@@ -273,3 +273,49 @@ def test_a_vehicle_cannot_list_the_fleet_and_is_told_why(secure: SecureFleet) ->
     code, _, err = secure.cli(ALPHA, "fleet")
     assert code == 1
     assert "access control may have refused the liveliness query" in err
+
+
+def test_a_plain_zenoh_client_lists_and_fetches(secure: SecureFleet, tmp_path: Path) -> None:
+    """Written from docs/wire.md and docs/deploy.md alone, with an operator's certificate."""
+    import ast
+    import subprocess
+    import sys
+
+    script = Path(__file__).with_name("plain_client.py")
+    imported = {
+        alias.name.split(".")[0]
+        for node in ast.walk(ast.parse(script.read_text()))
+        if isinstance(node, ast.Import | ast.ImportFrom)
+        for alias in (
+            node.names if isinstance(node, ast.Import) else [ast.alias(node.module or "")]
+        )
+    }
+    assert "fleetlog" not in imported
+    code, _, err = secure.cli(OPS, "poke", "--vehicle", "alpha", "LOGGER_RESTART=true")
+    assert code == 0, err
+    time.sleep(1.0)
+    done = subprocess.run(
+        [sys.executable, str(script), str(secure.config(OPS)), str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=120,
+        check=False,
+    )
+    assert done.returncode == 0, done.stderr
+    lines = [json.loads(x) for x in done.stdout.splitlines()]
+    assert set(lines[0]["vehicles"]) >= {"alpha", "bravo"}
+    fetched = [x for x in lines[1:] if x["vehicle"] == "alpha"]
+    assert any(x["file"].endswith(".alog") for x in fetched)
+    for item in fetched:
+        path = tmp_path / "alpha"
+        (copy,) = path.glob(f"*/{item['file']}")
+        assert copy.stat().st_size == item["size"]
+
+
+def test_status_says_which_configuration_and_identity(secure: SecureFleet) -> None:
+    code, _, err = secure.cli(OPS, "status", "alpha")
+    assert code == 0, err
+    assert f"{secure.config(OPS)} (this machine's configuration)" in err
+    assert "identity fleetlog:operator:ops: operator ops" in err
+    assert "valid until" in err
+    assert '"wire": 2' in secure.cli(OPS, "status", "alpha", "--json")[1]
