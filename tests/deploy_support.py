@@ -87,7 +87,7 @@ class SecureFleet:
         if zenohd is None:
             proc = Proc(["router", "-c", config], self.directory, self.env(where))
             self.procs[f"router:{name}"] = proc
-            proc.wait_for("listening on", timeout=20)
+            proc.wait_for("listening on", timeout=60)
         else:
             proc = Proc([zenohd, "-c", config], self.directory, self.env(where), program=True)
             self.procs[f"router:{name}"] = proc
@@ -101,7 +101,7 @@ class SecureFleet:
         proc = Proc(["record"], cwd, self.env(vehicle_dir(vehicle)))
         self.procs[f"record:{vehicle}"] = proc
         if wait:
-            proc.wait_for("recording vehicle", timeout=20)
+            proc.wait_for("recording vehicle", timeout=60)
         return proc
 
     def start_all(self) -> None:
@@ -153,7 +153,7 @@ class SecureFleet:
         path.write_text(str(conf))
         return path
 
-    def wait_vehicles(self, machine: str, want: set[str], timeout: float = 20.0) -> set[str]:
+    def wait_vehicles(self, machine: str, want: set[str], timeout: float = 60.0) -> set[str]:
         """Wait until ``machine`` sees ``want`` among the vehicles up (via ``fleetlog fleet``)."""
         deadline = time.monotonic() + timeout
         seen: set[str] = set()
