@@ -114,6 +114,13 @@ def _log_server(root: str, vehicle: str, cfg: LoggerConfig, zopts: SessionOption
             active=active,
             hint=hint if hint.is_absolute() else Path.cwd() / hint,
         )
+        # The prune command checks acknowledged files against the digests the server
+        # computed while sending them, and leaves the sessions it is sending alone.
+        pruner = recorder.commands.pruner
+        pruner.digest = lambda path: catalog.digests.sha256(
+            catalog.root, (path.parent.name, path.name)
+        )[0]
+        pruner.fetching = lambda: catalog.leases.sessions(catalog.root.path)
         if not own_session:
             return LogServer(recorder_session, catalog, root=root, vehicle=vehicle).start().close
         session = open_session(zopts)

@@ -213,6 +213,7 @@ class LogServer:
         self._queryables.clear()
         self._light.shutdown()
         self._heavy.shutdown()
+        self.catalog.leases.close()  # no more fetches in flight from this process
         if self._warmer is not None:
             self._warmer.join(5.0)
             self._warmer = None

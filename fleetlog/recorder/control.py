@@ -7,7 +7,8 @@ count and report alike (docs/wire.md, "Control").
 Threads: MOOS commands arrive in the recorder's drain thread (:meth:`CommandHandler.moos`)
 and run there at once, as pLogger runs them. Control queries arrive in the control
 queryable's own thread: ``status`` and ``ack`` are answered there (they read counters, or
-append one line beside the sessions); commands that change what is recorded are queued for
+append one line beside the sessions), ``prune`` runs in a thread of its own
+(:mod:`fleetlog.recorder.pruning`); commands that change what is recorded are queued for
 the drain thread (:meth:`CommandHandler.submit`), which runs at most one per pass between
 batches of samples (:meth:`CommandHandler.run_queued`), so a flood of queries costs the
 recording what as many PLOGGER_CMD posts would, and a full queue refuses at once.
@@ -22,6 +23,7 @@ from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
 from fleetlog.errors import StorageError
+from fleetlog.recorder.pruning import Pruner
 from fleetlog.storage.metafile import append_ack
 from fleetlog.wire.control import CommandRecord, ControlRequest, Outcome
 from fleetlog.wire.message import MoosMessage
@@ -109,6 +111,8 @@ class CommandHandler:
         self.command_var = recorder.app_name.upper() + "_CMD"
         #: the recorder is stopping: MOOS commands are logged and counted, not run
         self.closing = False
+        #: runs ``prune`` (retention of acknowledged sessions) in a thread of its own
+        self.pruner = Pruner(recorder.log_root, recorder.current_session_name)
 
     # -- the ring
 
@@ -194,6 +198,9 @@ class CommandHandler:
 
         ``reply`` is called exactly once, from this thread or the drain thread.
         """
+        if request.cmd == "prune":
+            self.pruner.submit(lambda outcome: reply(self._record(request, outcome)))
+            return
         if request.cmd in _IN_CONTROL_THREAD:
             reply(self._record(request, self._run_here(request)))
             return

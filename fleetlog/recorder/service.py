@@ -12,6 +12,7 @@ complete.
 from __future__ import annotations
 
 import contextlib
+import functools
 import gc
 import json
 import queue
@@ -45,7 +46,14 @@ from fleetlog.transport.queries import (
 )
 from fleetlog.transport.services import live_vehicles
 from fleetlog.transport.session import SessionOptions, open_session, translate_zerror
-from fleetlog.wire.control import CONTROL, MAX_REQUEST, Outcome, parse_control_request
+from fleetlog.wire.control import (
+    CONTROL,
+    MAX_REQUEST,
+    PRUNE,
+    ControlRequest,
+    Outcome,
+    parse_control_request,
+)
 from fleetlog.wire.keys import service_key
 from fleetlog.wire.message import MoosMessage
 
@@ -76,6 +84,21 @@ _CHECK_EVERY = 32
 #: the longest one subscriber's batch may hold the drain thread before the others get a
 #: turn: a flood of costly commands on one key must not hold back the variables on the rest
 _SLICE = 0.01
+
+
+def _on_its_key(request: ControlRequest, key: str) -> ControlRequest:
+    """Check that ``prune`` came on ``…/control/prune`` and every other command on ``…/control``.
+
+    Raises:
+        FormatError: it came on the other key.
+    """
+    pruning = key.endswith("/" + PRUNE)
+    if (request.cmd == PRUNE) != pruning:
+        control = key.removesuffix("/" + PRUNE)
+        where = f"{control}/{PRUNE}" if request.cmd == PRUNE else control
+        msg = f"command {request.cmd!r} is taken only on {where}"
+        raise FormatError(msg)
+    return request
 
 
 class _Fifo(Protocol):
@@ -238,7 +261,7 @@ class RecorderService:
         background = BackgroundWriter(errors.append)
         token: LivelinessToken | None = None
         status_q: ServiceQueryable | None = None
-        control_q: ServiceQueryable | None = None
+        control_q: list[ServiceQueryable] = []
         recorder: Recorder | None = None
         detach: Callable[[], None] | None = None
         try:
@@ -287,8 +310,8 @@ class RecorderService:
             self._drain(recorder, deadline=time.monotonic() + 2.0)
         finally:
             # No more commands; those still queued are refused, not left unanswered.
-            if control_q is not None:
-                control_q.undeclare()
+            for queryable in control_q:
+                queryable.undeclare()
             if recorder is not None:
                 recorder.commands.cancel_queued("the recorder is stopping")
             # Stop reception first, then log what the closed channels still hold: a sample
@@ -367,20 +390,22 @@ class RecorderService:
 
     def _declare_control(
         self, session: ZenohSession, recorder: Recorder, outbox: _Outbox
-    ) -> ServiceQueryable:
+    ) -> list[ServiceQueryable]:
         """The control service (docs/wire.md): read here, run by the one command handler.
 
         This thread only reads the request (at most 64 KiB) and hands it over; commands
         that change the recording run in the drain thread, one per pass, and their replies
         go out from the outbox thread, so neither Zenoh's threads nor the drain thread wait.
+        ``prune`` is taken only on ``control/prune``, every other command only on
+        ``control``: access control grants deleting on a key of its own.
         """
-        key = service_key(self.options.root, self.options.vehicle, CONTROL)
+        control = service_key(self.options.root, self.options.vehicle, CONTROL)
         commands = recorder.commands
 
-        def on_query(query: IncomingQuery) -> None:
+        def on_query(query: IncomingQuery, key: str) -> None:
             payload = query.payload(MAX_REQUEST)
             try:
-                request = parse_control_request(payload, query.parameters)
+                request = _on_its_key(parse_control_request(payload, query.parameters), key)
             except FormatError as err:
                 text = (payload or b"").decode("utf-8", "replace") or query.parameters
                 commands.refuse_request(text, str(err))
@@ -406,7 +431,10 @@ class RecorderService:
 
             commands.submit(request, reply)
 
-        return ServiceQueryable(session, key, on_query)
+        out: list[ServiceQueryable] = []
+        for key in (control, f"{control}/{PRUNE}"):
+            out.append(ServiceQueryable(session, key, functools.partial(on_query, key=key)))
+        return out
 
     def _pump(
         self,

@@ -42,6 +42,7 @@ from fleetlog.errors import FormatError, StorageError
 from fleetlog.moos.naming import HINT_FILE_NAME, parse_hint_file, parse_session_root
 from fleetlog.storage.alogscan import HeadInfo, VariableScan, is_compressed, read_head, tail_offset
 from fleetlog.storage.confined import ConfinedRoot, DigestCache
+from fleetlog.storage.leases import FileLeases
 from fleetlog.storage.metafile import read_meta, recorder_alive
 from fleetlog.wire.query import FileInfo, FileMeta, LatestInfo, SessionInfo, check_component
 from fleetlog.wire.session_meta import CUT, META_NAME, OPEN, SessionMeta
@@ -116,6 +117,8 @@ class LogCatalog:
         self.root = ConfinedRoot(log_root)
         self.vehicle = vehicle
         self.digests = DigestCache()
+        #: the files being fetched now: retention deletes none of them (storage/leases.py)
+        self.leases = FileLeases()
         self._active = active
         self._hint = Path(hint) if hint is not None else None
         self._quiet = quiet
@@ -492,6 +495,9 @@ class LogCatalog:
         data, st, steady = self.root.read_steady((session, name), offset, length)
         complete = self.is_complete(session)
         meta = FileMeta(offset, len(data), st.st_size, st.st_mtime, complete)
+        if length:  # a question about the file (its digest) is no download
+            finished = complete and offset + len(data) >= st.st_size
+            self.leases.served(self.root.resolve(session, name), st, finished=finished)
         if not (complete and steady and data):
             return data, meta, _nothing
         return data, meta, functools.partial(self.digests.feed, st, offset, data)

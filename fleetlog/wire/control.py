@@ -21,6 +21,7 @@ from fleetlog.wire.query import check_component, parse_parameters
 __all__ = [
     "CONTROL",
     "MAX_REQUEST",
+    "PRUNE",
     "RECORDER_COMMANDS",
     "CommandRecord",
     "ControlRequest",
@@ -45,8 +46,12 @@ RECORDER_COMMANDS: Mapping[str, tuple[str, ...]] = {
     "log_request": ("spec",),
     "copy_file": ("path",),
     "ack": ("session", "files"),
+    "prune": (),
     "status": (),
 }
+#: the key (under the control key) that alone takes ``prune``, so access control can grant
+#: deleting apart from the other commands: ``<root>/V/@fleetlog/control/prune``
+PRUNE = "prune"
 #: fields any request may carry: who sent it and its own time stamp (for the ring)
 _COMMON = ("cmd", "source", "time")
 _LIMITS = {"key": 64, "value": 1024, "spec": 1024, "path": 4096, "session": 255, "source": 64}
