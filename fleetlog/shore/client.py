@@ -41,6 +41,7 @@ from fleetlog.shore.status import VehicleStatus
 from fleetlog.transport.queries import PendingQuery, ReplyItem, ZenohSession, start_query
 from fleetlog.transport.services import refusal_hint
 from fleetlog.transport.session import SessionOptions, open_session
+from fleetlog.wire.control import CONTROL, PRUNE
 from fleetlog.wire.keys import (
     DEFAULT_ROOT,
     check_root,
@@ -476,6 +477,29 @@ class FleetClient:
                 raise QueryError(msg)
         else:
             replies = self._replies(vehicle, selector, timeout, payload)
+        return self._control_replies(vehicle, replies)
+
+    def prune(
+        self, vehicle: str, *, source: str = "", timeout: float | None = None
+    ) -> list[ControlReply]:
+        """Ask the vehicle's recorder to delete the sessions the shore acknowledged.
+
+        Sent on ``<root>/V/@fleetlog/control/prune`` (access control grants it apart from the
+        other commands); the vehicle's retention removes every acknowledged session except
+        the one being recorded and those being fetched. The reply's extra fields say what
+        was removed (``removed``, ``freed``, ``skipped``, ``kept``).
+
+        Raises:
+            QueryError: nothing answered (or access control refused), an error reply, or a
+                reply that is not a control reply.
+        """
+        selector = service_key(self.root, vehicle, CONTROL, PRUNE)
+        payload = json.dumps({"cmd": PRUNE, "source": source}).encode()
+        replies = self._replies(vehicle, selector, timeout or max(self.timeout, 120.0), payload)
+        return self._control_replies(vehicle, replies)
+
+    @staticmethod
+    def _control_replies(vehicle: str, replies: list[ReplyItem]) -> list[ControlReply]:
         out: list[ControlReply] = []
         for reply in replies:
             try:
@@ -670,7 +694,7 @@ class FleetClient:
         request = FileRequest(offset, length, sha256)
         params = with_server(request.parameters(), server)
         selector = file_key(self.root, vehicle, session, name) + "?" + params
-        handler = self._get(selector, timeout or self.timeout)
+        handler = self._get(selector, timeout or self.timeout)  # at "bulk" priority
         return PendingRange(self, vehicle, selector, offset, length, handler)
 
     def read_range(

@@ -31,13 +31,14 @@ import contextlib
 import threading
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TypeVar
 
 from fleetlog.errors import QueryError, StorageError
 from fleetlog.shore.client import FleetClient, PendingRange, TransientQueryError
+from fleetlog.shore.pacing import FixedPacer, Pacer, RateLimit
 from fleetlog.storage.download import PartFile, sha256_file
 from fleetlog.wire.query import DEFAULT_RANGE, FileInfo, FileMeta, SessionInfo, check_component
 from fleetlog.wire.session_meta import CLOSED, CUT
@@ -48,6 +49,8 @@ WINDOW = 8
 OVERLAP = 4096
 POLL = 1.0
 RETRY_FOR = 30.0
+#: names a vehicle never lists (a download in progress); one that does is not followed there
+_DOWNLOADING = (".part", ".part.json", ".part.json.tmp")
 
 
 class Progress:
@@ -62,11 +65,16 @@ class Progress:
 
 @dataclass
 class FileOutcome:
-    """What happened to one file: ``fetched``, ``up to date`` or ``partial`` (.part kept)."""
+    """What happened to one file: ``fetched``, ``up to date`` or ``partial`` (.part kept).
+
+    ``sha256`` is the vehicle's digest of the file, which the local copy was verified
+    against (None unless fetched or up to date).
+    """
 
     name: str
     size: int
     status: str
+    sha256: str | None = None
 
 
 @dataclass
@@ -92,22 +100,6 @@ class FetchOutcome:
     received: int = 0
     seconds: float = 0.0
     files: list[FileOutcome] = field(default_factory=list)
-
-
-class _RateLimit:
-    """Spaces out ranges so the transfer stays under ``rate`` bytes per second."""
-
-    def __init__(self, rate: float | None) -> None:
-        self.rate = rate
-        self._next = time.monotonic()
-
-    def wait(self, amount: int) -> None:
-        if not self.rate:
-            return
-        now = time.monotonic()
-        if self._next > now:
-            time.sleep(self._next - now)
-        self._next = max(now, self._next) + amount / self.rate
 
 
 _T = TypeVar("_T")
@@ -160,10 +152,9 @@ class _Context:
     vehicle: str
     session: str
     progress: Progress
-    window: int
-    chunk: int
+    pacer: Pacer
     retry_for: float
-    limit: _RateLimit
+    limits: tuple[RateLimit, ...]
     cancel: threading.Event
     server: str | None = None
     received: int = 0
@@ -200,6 +191,7 @@ class _Transfer:
         self.part = PartFile(final, source)
         self.status = ""
         self.meta: FileMeta | None = None
+        self.sha256: str | None = None
         self._digest: PendingRange | None = None
         self._verify_tail = False
 
@@ -233,6 +225,7 @@ class _Transfer:
             meta = self._digest_result()
             if meta.sha256 is not None and sha256_file(self.final) == meta.sha256:
                 self.status = "up to date"
+                self.sha256 = meta.sha256
                 ctx.progress.advance(ctx.vehicle, remote.size)
                 return
         resumed = self.part.open()
@@ -285,6 +278,8 @@ class _Transfer:
         """Fetch until the ``.part`` holds ``target`` bytes (or what the file has, if less)."""
         if self.status:
             return
+        if target == self.part.size > 0 and self.meta is not None:
+            return  # nothing new (a followed file that did not grow): no range to ask
         # retry_for counts from when the vehicle stopped answering, not from the start of the
         # file: a transfer longer than retry_for must still ride out a dropped link.
         deadline: float | None = None
@@ -320,7 +315,7 @@ class _Transfer:
         start = part.size
         overlap = min(OVERLAP, start) if self._verify_tail else 0
         cursor = start - overlap
-        inflight: deque[PendingRange] = deque()
+        inflight: deque[tuple[PendingRange, float]] = deque()
         end = target
         link = ctx.link
         link.idle()
@@ -329,32 +324,32 @@ class _Transfer:
             if ctx.cancel.is_set():
                 msg = "the fetch was interrupted; the same command resumes it"
                 raise QueryError(msg)
-            ahead = sum(p.length for p in inflight)
-            while len(inflight) < ctx.window and cursor < end:
+            ahead = sum(p.length for p, _ in inflight)
+            while cursor < end and ctx.pacer.room(ahead, len(inflight)):
                 if len(inflight) >= 2 and ahead >= link.window_bytes():
                     # As much in flight as the link carries in a few seconds, and never
                     # fewer than two ranges: between one range's end and the next one's
                     # first bytes the link would idle, and TCP restarts slowly after idling.
                     break
-                length = min(ctx.chunk, end - cursor)
-                ctx.limit.wait(length)
+                length = min(ctx.pacer.chunk(), end - cursor)
+                for limit in ctx.limits:
+                    limit.wait(length)
                 ahead += length
                 timeout = link.timeout(ahead, ctx.client.timeout)
-                inflight.append(
-                    ctx.client.request_range(
-                        ctx.vehicle,
-                        ctx.session,
-                        self.name,
-                        cursor,
-                        length,
-                        server=ctx.server,
-                        timeout=timeout,
-                    )
+                request = ctx.client.request_range(
+                    ctx.vehicle,
+                    ctx.session,
+                    self.name,
+                    cursor,
+                    length,
+                    server=ctx.server,
+                    timeout=timeout,
                 )
+                inflight.append((request, time.monotonic()))
                 cursor += length
             if not inflight:
                 return
-            pending = inflight.popleft()
+            pending, sent = inflight.popleft()
             if pending.offset >= end:
                 # Asked for before the file turned out shorter: nothing there to take.
                 with contextlib.suppress(QueryError):
@@ -369,6 +364,7 @@ class _Transfer:
                     raise _Restart from None  # the file shrank: rewritten on the vehicle
                 raise
             link.arrived(len(data), asked_at)
+            ctx.pacer.arrived(len(data), time.monotonic() - sent)
             self.meta = meta
             if pending.offset + pending.length > meta.size:
                 end = min(end, meta.size)  # the file is shorter than the listing said
@@ -417,6 +413,7 @@ class _Transfer:
             msg = f"vehicle {self.ctx.vehicle}: {err}"
             raise QueryError(msg) from None
         self.status = "fetched"
+        self.sha256 = meta.sha256
 
     def keep(self) -> None:
         """Leave the ``.part`` for later (the session is still being written)."""
@@ -429,7 +426,7 @@ class _Transfer:
         size = self.part.size
         if self.status == "up to date":
             size = self.final.stat().st_size
-        return FileOutcome(self.name, size, self.status or "failed")
+        return FileOutcome(self.name, size, self.status or "failed", self.sha256)
 
     def abandon(self) -> None:
         """Close the ``.part`` after a failure; it stays for the next run."""
@@ -457,6 +454,9 @@ def fetch_session(
     max_rate: float | None = None,
     cancel: threading.Event | None = None,
     server: str | None = None,
+    pacer: Pacer | None = None,
+    limits: Sequence[RateLimit] = (),
+    names: Collection[str] | None = None,
 ) -> FetchOutcome:
     """Download a session of a vehicle into ``out_dir/<session>/``.
 
@@ -474,6 +474,13 @@ def fetch_session(
         max_rate: bytes per second at most (a thin radio link), or None.
         cancel: set it to stop the fetch; the ``.part`` files stay.
         server: ask only the process with this Zenoh id (one of two recorders of the vehicle).
+        pacer: decides the ranges in flight and their size (default: ``window`` ranges of
+            ``chunk`` bytes); :class:`~fleetlog.shore.pacing.LinkPacer` for a shared radio
+            link.
+        limits: rate caps shared with other transfers (per vehicle, over the fleet).
+        names: fetch only these files of the session (default: every file). Files go
+            smallest first, so a session's ylog, slog, mission copy and metadata arrive
+            before its alog.
 
     Returns:
         What was fetched.
@@ -491,10 +498,9 @@ def fetch_session(
         vehicle,
         session,
         progress or Progress(),
-        max(1, window),
-        chunk,
+        pacer or FixedPacer(window, chunk),
         retry_for,
-        _RateLimit(max_rate),
+        (*limits, RateLimit(max_rate)) if max_rate else tuple(limits),
         cancel or threading.Event(),
         server,
     )
@@ -505,9 +511,14 @@ def fetch_session(
             info = _riding_out(
                 ctx, lambda: client.session(vehicle, session, brief=True, server=server)
             )
-            ctx.progress.total(vehicle, info.size)
+            wanted = [
+                f
+                for f in info.files
+                if (names is None or f.name in names) and not f.name.endswith(_DOWNLOADING)
+            ]
+            ctx.progress.total(vehicle, sum(f.size for f in wanted))
             outcome.state = info.state
-            for remote in info.files:
+            for remote in sorted(wanted, key=lambda f: (f.size, f.name)):
                 transfer = transfers.get(remote.name)
                 if transfer is None:
                     transfer = _Transfer(ctx, remote, outcome.directory / remote.name)

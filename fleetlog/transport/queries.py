@@ -30,6 +30,7 @@ from fleetlog.errors import TransportError
 from fleetlog.transport.session import translate_zerror
 
 __all__ = [
+    "PRIORITIES",
     "IncomingQuery",
     "LivelinessToken",
     "PendingQuery",
@@ -217,10 +218,12 @@ class ReplyItem:
     replier: str | None = None
 
 
-#: Zenoh priorities by what a query is for. Replies travel at their query's priority, so on
-#: a slow link a command's answer overtakes a fetch's ranges in Zenoh's queues.
+#: Zenoh priorities by what a query is for. A reply travels at its query's priority (Zenoh
+#: 1.10 matches the reply's QoS to the query's), so on a shared radio link commands and
+#: telemetry overtake the file ranges and greps of fetch and collect, which go at Zenoh's
+#: lowest priority (still on the bulk link of deploy's two: priorities 5-7).
 PRIORITIES: dict[str, zenoh.Priority] = {
-    "bulk": zenoh.Priority.DATA_LOW,
+    "bulk": zenoh.Priority.BACKGROUND,
     "normal": zenoh.Priority.DATA,
     "command": zenoh.Priority.INTERACTIVE_HIGH,
 }
@@ -279,7 +282,8 @@ def start_query(
 ) -> PendingQuery:
     """Send a query (with ``payload``, e.g. a control request) without waiting for replies.
 
-    ``priority``: ``bulk`` (file ranges, grep), ``normal``, or ``command`` (control, status).
+    ``priority``: ``bulk`` (file ranges, grep: Zenoh's background priority), ``normal``, or
+    ``command`` (control, status).
 
     Raises:
         TransportError: the query could not be sent.
