@@ -2,6 +2,7 @@
 
 from fleetlog.cli import (
     bridge,
+    collect,
     demo,
     deploy,
     export,
@@ -21,6 +22,7 @@ from fleetlog.cli import (
 
 __all__ = [
     "bridge",
+    "collect",
     "demo",
     "deploy",
     "export",
