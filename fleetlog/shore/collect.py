@@ -56,7 +56,7 @@ from fleetlog.wire.query import SessionInfo, check_component
 from fleetlog.wire.session_meta import CLOSED
 from fleetlog.wire.session_meta import CUT as META_CUT
 
-__all__ = ["CollectOptions", "CollectReport", "Collector"]
+__all__ = ["CollectOptions", "CollectReport", "Collector", "plan_fetches"]
 
 #: how often the collector looks at the fleet's tokens and writes its records
 _TICK = 0.5
@@ -124,6 +124,28 @@ def _small(name: str) -> bool:
     return not name.endswith(ALOG_SUFFIXES)
 
 
+def plan_fetches(todo: Iterable[SessionInfo]) -> list[tuple[SessionInfo, frozenset[str] | None]]:
+    """Order the fetches of the ended sessions of a round (the one being recorded is followed).
+
+    Newest first, in two passes: every session's small files (metadata, ylog, slog, mission
+    copy...), then each session whole (its alog; the small files are then up to date).
+
+    Args:
+        todo: the sessions not all on shore, newest first.
+
+    Returns:
+        ``(session, names)`` in order: ``names`` the files of a first-pass fetch, None for a
+        whole session.
+    """
+    ended = [info for info in todo if _ended(info)]
+    first: list[tuple[SessionInfo, frozenset[str] | None]] = []
+    for info in ended:
+        small = frozenset(f.name for f in info.files if _small(f.name))
+        if small and len(small) < len(info.files):
+            first.append((info, small))
+    return first + [(info, None) for info in ended]
+
+
 class _Counter(Progress):
     """Keeps a transfer's figures in its in-flight entry (what ``--status`` shows)."""
 
@@ -183,6 +205,7 @@ class _Worker:
         self.following: tuple[str, str] | None = None  # (place, session)
         self.error: str | None = None
         self.rounds = 0
+        self._ack_said: str | None = None
 
     # -- the loop
 
@@ -263,16 +286,13 @@ class _Worker:
                 for info in reversed(sessions)  # newest first
                 if info.name in record.sessions and not record.sessions[info.name].done
             ]
-        recording = [info for info in todo if not _ended(info)]
-        ended = [info for info in todo if _ended(info)]
-        for info in recording:
-            self._follow(place, info, server)
-        # First every session's small files, newest first; then the alogs.
-        for info in ended:
-            small = [f.name for f in info.files if _small(f.name)]
-            if small and len(small) < len(info.files):
-                self._fetch(place, info.name, server, names=small, how="small files")
-        for info in ended:
+        for info in todo:
+            if not _ended(info):
+                self._follow(place, info, server)
+        for info, names in plan_fetches(todo):
+            if names is not None:
+                self._fetch(place, info.name, server, names=names, how="small files")
+                continue
             outcome = self._fetch(place, info.name, server, how="fetch")
             if outcome is not None:
                 self._settle(place, outcome)
@@ -413,8 +433,14 @@ class _Worker:
             try:
                 replies = c.client.control(self.vehicle, request)
             except QueryError as err:
-                c.log(f"{self.vehicle}: {session} not acknowledged yet: {err}")
-                return  # no recorder answers (a vehicle served by `fleetlog serve`): later
+                # No recorder answers (a vehicle served by `fleetlog serve` alone): the acks
+                # wait for one; said once, not every round.
+                said = f"sessions not acknowledged yet: {err}"
+                if said != self._ack_said:
+                    c.log(f"{self.vehicle}: {said}")
+                    self._ack_said = said
+                return
+            self._ack_said = None
             if any(r.ok for r in replies):
                 with place.lock:
                     place.record.session(session).acked = time.time()

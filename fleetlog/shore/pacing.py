@@ -120,7 +120,7 @@ class LinkPacer:
     """
 
     #: how long the smallest round trip seen stays the base delay
-    BASE_MEMORY = 30.0
+    BASE_MEMORY = 600.0
     #: round trips the current delay is the smallest of (a filter against noise)
     RECENT = 4
     #: the share of a second of the measured rate one range holds
@@ -130,7 +130,7 @@ class LinkPacer:
         self,
         *,
         target: float = 0.1,
-        min_chunk: int = 16 * KIB,
+        min_chunk: int = 4 * KIB,
         max_chunk: int = MIB,
         max_window: int = 8 * MIB,
         clock: Callable[[], float] = time.monotonic,
@@ -194,6 +194,10 @@ class LinkPacer:
             chunk = self._chunk
             if self._slow_start and queued < self.target / 2:
                 self.window += length  # doubles every round trip
+                # ranges grow with the window meanwhile: a LAN is at full speed in a few
+                # round trips, a radio link's slow start ends while they are still small
+                while self._chunk * 4 <= self.window and self._chunk < self.max_chunk:
+                    self._chunk *= 2
             else:
                 self._slow_start = False
                 # LEDBAT: one range more per window's worth of replies when on target,
@@ -204,9 +208,11 @@ class LinkPacer:
             self._resize(now)
 
     def _resize(self, now: float) -> None:
-        # A range holds the link about RANGE_SECONDS; re-sized at most once a second, and a
-        # new size measures its own base delay (a range's round trip includes its own bytes).
-        if now - self._chunk_at < 1.0:
+        # A range holds the link about RANGE_SECONDS; re-sized at most every 0.25 s. The
+        # base delay is kept: a range's round trip includes its own bytes, so a larger range
+        # looks queued by at most RANGE_SECONDS more, which errs on the side of the link (a
+        # base measured afresh while the queue is full would let it grow for good).
+        if now - self._chunk_at < 0.25:
             return
         self._chunk_at = now
         want = self._rate(now) * self.RANGE_SECONDS
@@ -216,6 +222,4 @@ class LinkPacer:
         size = min(size, self.max_chunk)
         if size != self._chunk:
             self._chunk = size
-            self._bases.clear()
-            self._recent.clear()
             self.window = max(self.window, float(size))

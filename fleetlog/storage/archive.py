@@ -159,10 +159,24 @@ def _dict(value: Any) -> dict[str, Any]:
     return value if isinstance(value, dict) else {}
 
 
+def _flight(obj: dict[str, Any]) -> dict[str, Any]:
+    """Keep what an in-flight entry may hold: a session, how, and finite figures."""
+    out: dict[str, Any] = {k: obj[k] for k in ("session", "how") if isinstance(obj.get(k), str)}
+    for key in ("since", "here", "size"):
+        value = _time(obj.get(key))
+        if value is not None:
+            out[key] = int(value) if isinstance(obj[key], int) else value
+    return out
+
+
 def _time(value: Any) -> float | None:
-    if isinstance(value, int | float) and not isinstance(value, bool) and math.isfinite(value):
-        return float(value)
-    return None
+    if not isinstance(value, int | float) or isinstance(value, bool):
+        return None
+    try:
+        number = float(value)
+    except OverflowError:  # an integer too large for a float
+        return None
+    return number if math.isfinite(number) else None
 
 
 @dataclass
@@ -238,7 +252,9 @@ class VehicleRecord:
             _time(obj.get("seen")),
             obj.get("up") is True,
             sessions,
-            [f for f in flights if isinstance(f, dict)] if isinstance(flights, list) else [],
+            [_flight(f) for f in flights if isinstance(f, dict)]
+            if isinstance(flights, list)
+            else [],
             error if isinstance(error, str) else None,
             received if isinstance(received, int) else 0,
             _time(obj.get("updated")),

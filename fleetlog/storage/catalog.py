@@ -535,6 +535,9 @@ class LogCatalog:
             _, st = self.root.read_range((session, name), 0, 0)
             return FileMeta(0, 0, st.st_size, st.st_mtime, False)
         digest, st = self.digests.sha256(self.root, (session, name), cancel)
+        # A fetch asks for the digest once the bytes are here: its lease ends (one that
+        # goes on, a resumed fetch, takes a new lease with its next range).
+        self.leases.served(self.root.resolve(session, name), st, finished=True)
         return FileMeta(0, 0, st.st_size, st.st_mtime, True, digest)
 
 

@@ -10,7 +10,9 @@ while any lease is held. The kernel drops the locks however the server dies.
 
 A lease starts with the first range of a file served, is renewed by every range, and ends
 
-* when a range reaches the end of the file of a complete session (the fetch has it all), or
+* when a range reaches the end of the file of a complete session (the fetch has it all),
+* when the fetch asks for the digest of the file of a complete session (it verifies what it
+  has: a fetch that goes on takes a new lease with its next range), or
 * :data:`LEASE_SECONDS` after the last range (a fetch whose link was cut retries for 30 s by
   default; a client that never comes back does not pin the session for ever).
 
@@ -57,8 +59,8 @@ class FileLeases:
         self.limit = max(1, limit)
         self._clock = clock
         self._lock = threading.Lock()
-        #: (device, inode) → (descriptor, expiry, path); oldest renewal first
-        self._held: OrderedDict[tuple[int, int], tuple[int, float, Path]] = OrderedDict()
+        #: path → (descriptor, expiry, (device, inode)); oldest renewal first
+        self._held: OrderedDict[Path, tuple[int, float, tuple[int, int]]] = OrderedDict()
 
     def served(self, path: Path, st: os.stat_result, *, finished: bool) -> None:
         """A range of ``path`` (whose ``stat`` is ``st``) was served.
@@ -69,35 +71,38 @@ class FileLeases:
             finished: the range reached the end of a file that no longer grows: the lease
                 ends now.
         """
-        key = (st.st_dev, st.st_ino)
+        identity = (st.st_dev, st.st_ino)
         now = self._clock()
         with self._lock:
             self._expire(now)
-            held = self._held.pop(key, None)
+            held = self._held.pop(path, None)
+            if held is not None and (finished or held[2] != identity):
+                # Done, or the name is another file now (replaced, as the session metadata
+                # is while it is open): the old lease goes.
+                _close(held[0])
+                held = None
             if finished:
-                if held is not None:
-                    _close(held[0])
                 return
             if held is None:
-                fd = _lock_shared(path, key)
+                fd = _lock_shared(path, identity)
                 if fd is None:
                     return  # being deleted, or gone: nothing to protect
-                held = (fd, 0.0, path)
-            self._held[key] = (held[0], now + self.lease, path)
+                held = (fd, 0.0, identity)
+            self._held[path] = (held[0], now + self.lease, identity)
             while len(self._held) > self.limit:
                 _, (old, _, _) = self._held.popitem(last=False)
                 _close(old)
 
     def _expire(self, now: float) -> None:
-        for key in [k for k, (_, until, _) in self._held.items() if until <= now]:
-            fd, _, _ = self._held.pop(key)
+        for path in [p for p, (_, until, _) in self._held.items() if until <= now]:
+            fd, _, _ = self._held.pop(path)
             _close(fd)
 
     def paths(self) -> list[Path]:
         """Return the files under lease now."""
         with self._lock:
             self._expire(self._clock())
-            return [path for _, _, path in self._held.values()]
+            return list(self._held)
 
     def sessions(self, log_root: Path) -> set[str]:
         """Return the names of the sessions directly under ``log_root`` with a file under lease."""

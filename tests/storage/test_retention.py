@@ -247,3 +247,22 @@ def test_digest_is_asked_only_for_fully_acknowledged_sessions(tmp_path: Path) ->
 
     retention.survey(tmp_path, current=None, digest=digest)
     assert set(asked) == {NAMES[2]}
+
+
+def test_a_replaced_file_moves_its_lease(tmp_path: Path) -> None:
+    # The session metadata is replaced (rename) while its session is open: the lease follows
+    # the name, and the old file's lease does not pin the session for ever.
+    one = _session(tmp_path, NAMES[0])
+    meta = one / ".fleetlog-session.json"
+    meta.write_text("v1")
+    leases = FileLeases()
+    try:
+        leases.served(meta, meta.stat(), finished=False)
+        (one / "tmp").write_text("v2")
+        os.replace(one / "tmp", meta)
+        leases.served(meta, meta.stat(), finished=True)
+        assert leases.paths() == []
+        with exclusive_files([meta]) as free:
+            assert free
+    finally:
+        leases.close()
