@@ -30,6 +30,7 @@ from fleetlog.cli.tables import console, human_size, human_time, plain
 from fleetlog.errors import QueryError, UsageError
 from fleetlog.shore.collect import CollectOptions, Collector
 from fleetlog.shore.holdings import ArchiveHoldings, holdings
+from fleetlog.transport.notify import Notifier, Watchdog
 
 __all__ = ["collect", "parse_rate"]
 
@@ -234,8 +235,11 @@ def collect(
         retry_for=retry_for,
     )
     stop = threading.Event()
+    notifier = Notifier()
+    watchdog = Watchdog(notifier)
 
     def on_signal(signum: int, frame: object) -> None:
+        notifier.stopping("keeping what is in flight for the next start")
         stop.set()
 
     signal.signal(signal.SIGINT, on_signal)
@@ -245,7 +249,8 @@ def collect(
     ) as client:
         collector = Collector(client, archive, options, log=_say)
         _say(f"collecting into {archive}")
-        report = collector.run(stop)
+        notifier.ready(f"collecting into {archive}")
+        report = collector.run(stop, tick=watchdog.kick if watchdog.enabled else lambda: None)
     if not once:
         _say("stopped")
         return

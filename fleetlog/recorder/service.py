@@ -50,8 +50,8 @@ from fleetlog.wire.control import (
     CONTROL,
     MAX_REQUEST,
     PRUNE,
-    ControlRequest,
     Outcome,
+    check_command_key,
     parse_control_request,
 )
 from fleetlog.wire.keys import service_key
@@ -84,21 +84,6 @@ _CHECK_EVERY = 32
 #: the longest one subscriber's batch may hold the drain thread before the others get a
 #: turn: a flood of costly commands on one key must not hold back the variables on the rest
 _SLICE = 0.01
-
-
-def _on_its_key(request: ControlRequest, key: str) -> ControlRequest:
-    """Check that ``prune`` came on ``…/control/prune`` and every other command on ``…/control``.
-
-    Raises:
-        FormatError: it came on the other key.
-    """
-    pruning = key.endswith("/" + PRUNE)
-    if (request.cmd == PRUNE) != pruning:
-        control = key.removesuffix("/" + PRUNE)
-        where = f"{control}/{PRUNE}" if request.cmd == PRUNE else control
-        msg = f"command {request.cmd!r} is taken only on {where}"
-        raise FormatError(msg)
-    return request
 
 
 class _Fifo(Protocol):
@@ -405,7 +390,8 @@ class RecorderService:
         def on_query(query: IncomingQuery, key: str) -> None:
             payload = query.payload(MAX_REQUEST)
             try:
-                request = _on_its_key(parse_control_request(payload, query.parameters), key)
+                request = parse_control_request(payload, query.parameters)
+                check_command_key(request, pruning=key != control)
             except FormatError as err:
                 text = (payload or b"").decode("utf-8", "replace") or query.parameters
                 commands.refuse_request(text, str(err))

@@ -31,7 +31,7 @@ from __future__ import annotations
 import contextlib
 import threading
 import time
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -56,11 +56,13 @@ from fleetlog.wire.query import SessionInfo, check_component
 from fleetlog.wire.session_meta import CLOSED
 from fleetlog.wire.session_meta import CUT as META_CUT
 
-__all__ = ["CollectOptions", "CollectReport", "Collector", "plan_fetches"]
+__all__ = ["CollectOptions", "CollectReport", "Collector", "plan_fetches", "pruned_names"]
 
 #: how often the collector looks at the fleet's tokens and writes its records
 _TICK = 0.5
 _SAVE_EVERY = 2.0
+#: sessions one prune reply may name (the vehicle names at most 1024)
+MAX_PRUNED = 4096
 
 
 @dataclass(frozen=True)
@@ -144,6 +146,14 @@ def plan_fetches(todo: Iterable[SessionInfo]) -> list[tuple[SessionInfo, frozens
         if small and len(small) < len(info.files):
             first.append((info, small))
     return first + [(info, None) for info in ended]
+
+
+def pruned_names(extra: Mapping[str, Any]) -> list[str]:
+    """The sessions a ``prune`` reply says were removed (a vehicle's reply, read defensively)."""
+    removed = extra.get("removed")
+    if not isinstance(removed, list):
+        return []
+    return [n for n in removed[:MAX_PRUNED] if isinstance(n, str)]
 
 
 class _Counter(Progress):
@@ -467,8 +477,7 @@ class _Worker:
             if not reply.ok:
                 c.log(f"{self.vehicle}: {reply.describe()}")
                 continue
-            removed = reply.extra.get("removed")
-            names = [n for n in removed if isinstance(n, str)] if isinstance(removed, list) else []
+            names = pruned_names(reply.extra)
             with place.lock:
                 for name in names:
                     entry = place.record.sessions.get(name)
@@ -616,8 +625,15 @@ class Collector:
                 except StorageError as err:
                     self.log(str(err))
 
-    def run(self, stop: threading.Event | None = None) -> CollectReport:
+    def run(
+        self, stop: threading.Event | None = None, tick: Callable[[], None] = lambda: None
+    ) -> CollectReport:
         """Collect until ``stop`` is set (or, with ``once``, until every vehicle up is done).
+
+        Args:
+            stop: set it to stop (the transfers keep their ``.part`` files).
+            tick: called every half second while the collector is healthy (systemd's
+                watchdog).
 
         Raises:
             StorageError: the archive's records cannot be written.
@@ -634,6 +650,7 @@ class Collector:
                 if time.monotonic() - last_save >= _SAVE_EVERY:
                     self._save()
                     last_save = time.monotonic()
+                tick()
                 stop.wait(_TICK)
             return self.report
         finally:

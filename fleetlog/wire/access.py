@@ -266,6 +266,15 @@ KEY_RULES: tuple[KeyRule, ...] = (
         replay=NOTHING,
     ),
     _rule(
+        # prune deletes the sessions the shore acknowledged: granted apart from the other
+        # commands, so a fleet may keep it from a role (collect --prune-after-collect)
+        "@fleetlog/control/prune",
+        "<root>/V/@fleetlog/control/prune",
+        vehicle={SV},
+        operator={A},
+        replay=NOTHING,
+    ),
+    _rule(
         "@fleetlog/latest",
         "<root>/V/@fleetlog/latest",
         vehicle={SV},

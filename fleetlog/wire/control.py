@@ -26,6 +26,7 @@ __all__ = [
     "CommandRecord",
     "ControlRequest",
     "Outcome",
+    "check_command_key",
     "parse_control_request",
 ]
 
@@ -170,6 +171,23 @@ def parse_control_request(
     if not (isinstance(when, int | float) and not isinstance(when, bool) and math.isfinite(when)):
         when = None
     return ControlRequest(cmd, args, _string("source", source), when, _clip(text))
+
+
+def check_command_key(request: ControlRequest, *, pruning: bool) -> ControlRequest:
+    """Check that ``prune`` came on ``…/control/prune`` and every other command on ``…/control``.
+
+    Args:
+        request: the checked request.
+        pruning: it came on the ``prune`` key.
+
+    Raises:
+        FormatError: it came on the other key.
+    """
+    if (request.cmd == PRUNE) != pruning:
+        where = f"@fleetlog/{CONTROL}/{PRUNE}" if request.cmd == PRUNE else f"@fleetlog/{CONTROL}"
+        msg = f"command {request.cmd!r} is taken only on {where}"
+        raise FormatError(msg)
+    return request
 
 
 def _is_number(value: Any) -> bool:

@@ -62,9 +62,8 @@ def test_units_restart_and_are_hardened(name: str) -> None:
     assert service["ProtectSystem"] == "strict"
     assert service["CapabilityBoundingSet"] == ""
     assert service["StandardError"] == "journal"
-    if name != "fleetlog-collect.service":
-        assert service["Type"] == "notify"
-        assert float(service["WatchdogSec"]) > 0
+    assert service["Type"] == "notify"
+    assert float(service["WatchdogSec"]) > 0
     if name.startswith("fleetlog-record"):
         assert service["ReadWritePaths"] == "/var/lib/fleetlog/%i"
         assert service["KillSignal"] == "SIGTERM"
@@ -140,6 +139,22 @@ def test_router_notifies_and_feeds_the_watchdog(tmp_path: Path, cli_env: dict[st
         manager.collect(1.5)
         assert sum(m == "WATCHDOG=1" for _, m in manager.messages) >= 2
         assert proc.stop(signal.SIGTERM) == 0
+    finally:
+        proc.close()
+        manager.close()
+
+
+def test_collector_notifies_and_feeds_the_watchdog(tmp_path: Path, cli_env: dict[str, str]) -> None:
+    manager = NotifySocket(tmp_path / "notify")
+    env = service_env(cli_env, manager.path, 1_500_000)
+    proc = Proc(["collect", str(tmp_path / "archive"), "-l", f"tcp/127.0.0.1:{free_port()}",
+                 "--no-multicast-scouting"], tmp_path, env)  # fmt: skip
+    try:
+        assert any("READY=1" in m for m in manager.collect(20, until="READY=1")), proc.stderr
+        manager.collect(1.5)
+        assert sum(m == "WATCHDOG=1" for _, m in manager.messages) >= 2
+        assert proc.stop(signal.SIGTERM) == 0
+        assert any("STOPPING=1" in m for m in manager.collect(2, until="STOPPING=1"))
     finally:
         proc.close()
         manager.close()
