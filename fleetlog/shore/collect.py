@@ -286,7 +286,10 @@ class _Worker:
                 entry.on_vehicle = True
                 entry.vehicle_state = info.state
                 if entry.done and self._changed(entry.remote, entry.files):
-                    entry.state = PARTIAL  # the vehicle's files differ from ours: look again
+                    # The vehicle's files differ from ours: fetch again, and acknowledge the
+                    # new bytes (the old ack no longer matches what the vehicle holds).
+                    entry.state = PARTIAL
+                    entry.acked = None
             for name, entry in record.sessions.items():
                 if name not in listed:
                     entry.on_vehicle = False
@@ -659,6 +662,12 @@ class Collector:
     def _once(self, stop: threading.Event) -> CollectReport:
         view = self.client.discover(self.options.expect)
         self.report.missing = view.missing
+        if not view.vehicles and not view.missing:
+            msg = (
+                "no vehicle is up (no recorder or serve token answered; check --connect /"
+                f" --mode){self.client.nobody_hint()}"
+            )
+            raise QueryError(msg)
         self._watch()
         for vehicle in view.names:
             self._start(vehicle)

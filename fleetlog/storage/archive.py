@@ -367,6 +367,9 @@ class ArchiveLock:
 
     def __init__(self, archive: Path) -> None:
         path = archive / LOCK_NAME
+        if archive.exists() and not archive.is_dir():
+            msg = f"the archive {archive} is not a directory"
+            raise StorageError(msg)
         try:
             archive.mkdir(parents=True, exist_ok=True)
             self._fd: int | None = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)

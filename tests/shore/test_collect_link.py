@@ -7,16 +7,19 @@ marked slow (about a minute); its throughput against a raw TCP copy is in docs/b
 
 from __future__ import annotations
 
+import os
+import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
-from query_support import same_tree
-from radio_link import radio_unavailable
+from query_support import make_session, same_tree
+from radio_link import RadioLink, _ip, radio_unavailable
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
 
-from collect_link import SESSION, run
+from collect_link import SESSION, SHORE_ADDR, VEHICLE_ADDR, Lines, fleetlog, netns, run
 
 
 @pytest.mark.slow
@@ -31,3 +34,49 @@ def test_a_poke_answers_within_a_second_while_collect_fills_the_link(tmp_path: P
     assert None not in during, figures
     assert max(during) < 1.0, figures
     same_tree(tmp_path / "logs" / SESSION, tmp_path / "archive" / "alpha" / SESSION)
+
+
+@pytest.mark.slow
+def test_a_link_cut_longer_than_zenoh_s_lease_mid_file(tmp_path: Path) -> None:
+    """The link is cut for 15 s (past Zenoh's 10 s lease) with the alog half here."""
+    why = radio_unavailable()
+    if why is not None:
+        pytest.skip(f"NO RADIO LINK HERE: {why}")
+    tag = f"{os.getpid() % 10000}"
+    vehicle_ns, shore_ns = f"ccv{tag}", f"ccs{tag}"
+    for ns in (vehicle_ns, shore_ns):
+        _ip("netns", "add", ns)
+        _ip("-n", ns, "link", "set", "lo", "up")
+    link = RadioLink(vehicle_ns, shore_ns, VEHICLE_ADDR, SHORE_ADDR, name=f"cc{tag}")
+    started: list[Lines] = []
+    try:
+        logs = tmp_path / "logs"
+        session = make_session(logs, SESSION, 1.0)
+        endpoint = f"tcp/{VEHICLE_ADDR}:7447"
+        record = fleetlog("record", "--vehicle", "alpha", "-l", endpoint, "--no-multicast-scouting")
+        recorder = Lines(netns(vehicle_ns, record), logs)
+        started.append(recorder)
+        recorder.wait_for("recording")
+        archive = tmp_path / "archive"
+        collect = Lines(netns(shore_ns, fleetlog("collect", str(archive), "--retry-for", "60",
+                                                 "-e", endpoint, "--no-multicast-scouting")),
+                        tmp_path)  # fmt: skip
+        started.append(collect)
+        part = archive / "alpha" / SESSION / f"{SESSION}.alog.part"
+        alog = (session / f"{SESSION}.alog").stat().st_size
+        deadline = time.monotonic() + 120
+        while not (part.exists() and part.stat().st_size > alog // 3):
+            assert time.monotonic() < deadline, collect.lines[-10:]
+            time.sleep(0.1)
+        link.set_cut(True)
+        time.sleep(15.0)
+        link.set_cut(False)
+        collect.wait_for(f"{SESSION} complete", timeout=180)
+        same_tree(session, archive / "alpha" / SESSION)
+        assert any("link is down" in line for _, line in collect.lines)  # the lease ran out
+    finally:
+        for proc in reversed(started):
+            proc.stop()
+        link.close()
+        for ns in (vehicle_ns, shore_ns):
+            subprocess.run(["ip", "netns", "del", ns], capture_output=True, check=False)
