@@ -1,11 +1,12 @@
 """collect over a thin radio link: its throughput against a raw TCP copy, and a poke's round trip.
 
 A vehicle and the shore in network namespaces of their own, joined by an emulated radio
-(``tests/radio_link.py``: 1 Mbit/s each way, 200 ms each way, a 100 kB modem buffer; needs
-root). The vehicle runs ``fleetlog record`` over a log root holding one finished session
-(``--mb`` MB). From the shore, all the while, a probe does what ``fleetlog poke`` does every
-0.5 s: it publishes a variable and waits until the recorder confirms it (a status query
-that travels behind the sample), and prints the round trip. Three phases, in one run:
+(``fleetlog/deploy/netlink.py``: 1 Mbit/s each way, 200 ms each way, 0.8 s (100 kB) of
+modem buffer; needs root). The vehicle runs ``fleetlog record`` over a log root holding one
+finished session (``--mb`` MB). From the shore, all the while, a probe does what ``fleetlog
+poke`` does every 0.5 s: it publishes a variable and waits until the recorder confirms it
+(a status query that travels behind the sample), and prints the round trip. Three phases,
+in one run:
 
 * **idle**: nothing else on the link;
 * **collect**: ``fleetlog collect --once`` of the session (its time is from the collector's
@@ -13,7 +14,7 @@ that travels behind the sample), and prints the round trip. Three phases, in one
 * **raw TCP**: the baseline, a plain TCP copy of as many bytes between the two namespaces
   (a Python socket, ``sendall`` of 64 KiB blocks), what any unpaced bulk transfer does.
 
-    sudo python bench/collect_link.py            # 1.5 MB session
+    sudo python bench/collect_link.py            # a 4 MB session
     sudo python bench/collect_link.py --mb 3 --rate 2e6 --delay 0.1
 """
 
@@ -33,7 +34,8 @@ TESTS = Path(__file__).resolve().parents[1] / "tests"
 sys.path.insert(0, str(TESTS))
 
 from query_support import make_session  # noqa: E402
-from radio_link import RadioLink, _ip, radio_unavailable  # noqa: E402
+
+from fleetlog.deploy.netlink import LinkShape, Namespace, RadioLink, namespaces_possible  # noqa: E402
 
 VEHICLE_ADDR, SHORE_ADDR = "10.202.0.1", "10.202.0.2"
 SESSION = "MOOSLog_1_1_2026_____10_00_00"
@@ -143,19 +145,20 @@ def describe(trips: list[float | None]) -> str:
     return text + (f", {lost} unanswered" if lost else "")
 
 
-def run(mb: float, rate: float, delay: float, queue: int, work: Path) -> dict[str, object]:
-    """One run of the three phases; returns the figures."""
+def run(mb: float, rate: float, delay: float, queue: float, work: Path) -> dict[str, object]:
+    """One run of the three phases (``queue``: seconds of buffer); returns the figures."""
     tag = f"{os.getpid() % 10000}"
-    vehicle_ns, shore_ns = f"clv{tag}", f"cls{tag}"
-    for ns in (vehicle_ns, shore_ns):
-        _ip("netns", "add", ns)
-        _ip("-n", ns, "link", "set", "lo", "up")
-    link = RadioLink(
-        vehicle_ns, shore_ns, VEHICLE_ADDR, SHORE_ADDR,
-        rate=rate, delay=delay, queue=queue, name=f"cl{tag}",
-    )  # fmt: skip
+    vehicle, shore = Namespace(f"clv{tag}"), Namespace(f"cls{tag}")
+    vehicle_ns, shore_ns = vehicle.name, shore.name
+    shape = LinkShape(delay=delay, rate=rate, queue=queue)
+    link = RadioLink(vehicle, VEHICLE_ADDR, shore, SHORE_ADDR, shape)
     started: list[Lines] = []
     figures: dict[str, object] = {}
+    # Every byte through the radio: Zenoh would hand payloads over 3 kB between processes of
+    # one host through shared memory, past the link (namespaces share /dev/shm).
+    config = work / "zenoh.json5"
+    config.write_text('{"transport": {"shared_memory": {"enabled": false}}}\n')
+    os.environ["ZENOH_CONFIG"] = str(config)
     try:
         logs = work / "logs"
         session = make_session(logs, SESSION, mb)
@@ -204,31 +207,31 @@ def run(mb: float, rate: float, delay: float, queue: int, work: Path) -> dict[st
         figures["idle"] = round_trips(probe, idle_start, idle_end)
         figures["during_collect"] = round_trips(probe, began, ended)
         figures["during_raw"] = round_trips(probe, raw_start, raw_end)
-        figures["link"] = link.counters()
+        figures["link"] = {"carried": link.bytes_carried, "dropped": link.counters[1]}
     finally:
         for proc in reversed(started):
             proc.stop()
         link.close()
-        for ns in (vehicle_ns, shore_ns):
-            subprocess.run(["ip", "netns", "del", ns], capture_output=True, check=False)
+        vehicle.close()
+        shore.close()
     return figures
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--mb", type=float, default=1.5, help="session size (MB of alog)")
+    parser.add_argument("--mb", type=float, default=4.0, help="session size (MB of alog)")
     parser.add_argument("--rate", type=float, default=1e6, help="bits/s each way")
     parser.add_argument("--delay", type=float, default=0.2, help="seconds each way")
-    parser.add_argument("--queue", type=int, default=100_000, help="modem buffer, bytes")
+    parser.add_argument("--queue", type=float, default=0.8, help="modem buffer, seconds")
     args = parser.parse_args()
-    why = radio_unavailable()
+    why = namespaces_possible()
     if why is not None:
         sys.exit(f"cannot run: {why}")
     with tempfile.TemporaryDirectory() as tmp:
         figures = run(args.mb, args.rate, args.delay, args.queue, Path(tmp))
     load = os.getloadavg()
     print(f"link: {args.rate / 1e6:g} Mbit/s, {args.delay * 1e3:.0f} ms each way, "
-          f"{args.queue} B buffer; session {figures['bytes']} B; load {load[0]:.1f}")  # fmt: skip
+          f"{args.queue:g} s buffer; session {figures['bytes']} B; load {load[0]:.1f}")  # fmt: skip
     collect_rate, raw_rate = float(figures["collect_rate"]), float(figures["raw_rate"])  # type: ignore[arg-type]
     print(f"collect: {figures['collect_s']:.1f} s, {collect_rate / 1e6:.3f} Mbit/s")
     print(f"raw TCP: {figures['raw_s']:.1f} s, {raw_rate / 1e6:.3f} Mbit/s")

@@ -225,7 +225,11 @@ class Fleet:
 
     def __init__(self, base: Path, env: dict[str, str], *, netns: bool) -> None:
         self.base = base
-        self.env = env
+        # Every byte through the link: Zenoh would hand payloads over 3 kB between processes
+        # of one host through shared memory, past the link (namespaces share /dev/shm).
+        config = base / "zenoh.json5"
+        config.write_text('{"transport": {"shared_memory": {"enabled": false}}}\n')
+        self.env = {**env, "ZENOH_CONFIG": str(config)}
         self.netns = netns
         self.prefix = f"flc{os.getpid() % 10000}{next(_serial)}"
         self.shore_ns = f"{self.prefix}sh"

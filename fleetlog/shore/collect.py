@@ -283,6 +283,10 @@ class _Worker:
                     continue  # never a session (pLogger's are named MOOSLog_…): not archived
                 entry = record.session(info.name)
                 entry.remote = {f.name: f.size for f in info.files}
+                # a verified file the vehicle now lists at another size is fetched again
+                entry.files = {
+                    n: f for n, f in entry.files.items() if entry.remote.get(n, f.size) == f.size
+                }
                 entry.on_vehicle = True
                 entry.vehicle_state = info.state
                 if entry.done and self._changed(entry.remote, entry.files):
@@ -304,9 +308,15 @@ class _Worker:
                 self._follow(place, info, server)
         for info, names in plan_fetches(todo):
             if names is not None:
-                self._fetch(place, info.name, server, names=names, how="small files")
+                outcome = self._fetch(place, info.name, server, names=names, how="small files")
+                if outcome is not None:
+                    self._settle(place, outcome, partial=True)
                 continue
-            outcome = self._fetch(place, info.name, server, how="fetch")
+            with place.lock:
+                entry = place.record.session(info.name)
+                # what the first pass verified is not asked about again
+                rest = [f.name for f in info.files if f.name not in entry.files]
+            outcome = self._fetch(place, info.name, server, names=rest, how="fetch")
             if outcome is not None:
                 self._settle(place, outcome)
         self._acknowledge(place)
@@ -396,8 +406,11 @@ class _Worker:
         )
         self.follower.start()
 
-    def _settle(self, place: _Place, outcome: FetchOutcome) -> None:
-        """Mark a session complete (or cut) once every file is here and verified."""
+    def _settle(self, place: _Place, outcome: FetchOutcome, *, partial: bool = False) -> None:
+        """Keep the files verified; mark the session complete (or cut) once all of them are.
+
+        ``partial``: the fetch was of some files only (the first pass).
+        """
         verified = {
             f.name: ArchivedFile(f.size, f.sha256)
             for f in outcome.files
@@ -406,12 +419,20 @@ class _Worker:
         with place.lock:
             entry = place.record.session(outcome.session)
             entry.files.update(verified)
-            if outcome.complete:
-                entry.remote = {f.name: f.size for f in outcome.files}
+            if outcome.complete and not partial:
+                # the vehicle's files as the fetch last listed them (a followed session's
+                # metadata appears or changes while it is followed)
+                entry.remote = {
+                    **{n: s for n, s in entry.remote.items() if n in entry.files},
+                    **{f.name: f.size for f in outcome.files},
+                }
             complete = (
                 outcome.complete
-                and bool(outcome.files)
-                and all(f.name in verified for f in outcome.files)
+                and not partial
+                and bool(entry.remote)
+                and all(
+                    n in entry.files and entry.files[n].size == s for n, s in entry.remote.items()
+                )
             )
             if not complete:
                 entry.state = PARTIAL

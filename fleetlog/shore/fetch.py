@@ -391,6 +391,11 @@ class _Transfer:
 
     # -- end
 
+    def ask_digest(self) -> None:
+        """Ask for the file's sha256 now, without waiting (:meth:`finish` reads the answer)."""
+        if not self.status and self._digest is None:
+            self._digest = self._ask_digest(self.part.size)
+
     def finish(self) -> None:
         """The session is complete: fetch any rest, verify the sha256, rename."""
         if self.status:
@@ -526,6 +531,8 @@ def fetch_session(
                     transfer.prepare(remote, info.complete)
                 transfer.pull(remote.size)
             if _ended(info):
+                for transfer in transfers.values():
+                    transfer.ask_digest()  # every file's at once: one round trip, not one each
                 for transfer in transfers.values():
                     transfer.finish()
                 outcome.complete = True

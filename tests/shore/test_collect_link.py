@@ -1,21 +1,22 @@
 """collect over a 1 Mbit/s radio link with 200 ms each way: a poke still answers within 1 s.
 
-The run is ``bench/collect_link.py``'s (namespaces joined by ``tests/radio_link.py``, a real
-recorder, a probe doing what ``fleetlog poke`` does every 0.5 s, then ``collect --once``),
-marked slow (about a minute); its throughput against a raw TCP copy is in docs/bench.md.
+The run is ``bench/collect_link.py``'s: namespaces joined by the radio of
+``fleetlog/deploy/netlink.py``, a real recorder, a probe doing what ``fleetlog poke`` does
+every 0.5 s, then ``collect --once``. Marked slow (about a minute); its throughput against a
+raw TCP copy is in docs/bench.md.
 """
 
 from __future__ import annotations
 
 import os
-import subprocess
 import sys
 import time
 from pathlib import Path
 
 import pytest
 from query_support import make_session, same_tree
-from radio_link import RadioLink, _ip, radio_unavailable
+
+from fleetlog.deploy.netlink import LinkShape, Namespace, RadioLink, namespaces_possible
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2] / "bench"))
 
@@ -24,10 +25,10 @@ from collect_link import SESSION, SHORE_ADDR, VEHICLE_ADDR, Lines, fleetlog, net
 
 @pytest.mark.slow
 def test_a_poke_answers_within_a_second_while_collect_fills_the_link(tmp_path: Path) -> None:
-    why = radio_unavailable()
+    why = namespaces_possible()
     if why is not None:
         pytest.skip(f"NO RADIO LINK HERE: {why}")
-    figures = run(1.5, 1e6, 0.2, 100_000, tmp_path)
+    figures = run(1.5, 1e6, 0.2, 0.8, tmp_path)
     during = figures["during_collect"]
     assert isinstance(during, list)
     assert len(during) >= 10  # the probe ran all along the transfer
@@ -39,15 +40,14 @@ def test_a_poke_answers_within_a_second_while_collect_fills_the_link(tmp_path: P
 @pytest.mark.slow
 def test_a_link_cut_longer_than_zenoh_s_lease_mid_file(tmp_path: Path) -> None:
     """The link is cut for 15 s (past Zenoh's 10 s lease) with the alog half here."""
-    why = radio_unavailable()
+    why = namespaces_possible()
     if why is not None:
         pytest.skip(f"NO RADIO LINK HERE: {why}")
     tag = f"{os.getpid() % 10000}"
-    vehicle_ns, shore_ns = f"ccv{tag}", f"ccs{tag}"
-    for ns in (vehicle_ns, shore_ns):
-        _ip("netns", "add", ns)
-        _ip("-n", ns, "link", "set", "lo", "up")
-    link = RadioLink(vehicle_ns, shore_ns, VEHICLE_ADDR, SHORE_ADDR, name=f"cc{tag}")
+    vehicle, shore = Namespace(f"ccv{tag}"), Namespace(f"ccs{tag}")
+    vehicle_ns, shore_ns = vehicle.name, shore.name
+    shape = LinkShape(delay=0.2, rate=1e6, queue=0.8)
+    link = RadioLink(vehicle, VEHICLE_ADDR, shore, SHORE_ADDR, shape)
     started: list[Lines] = []
     try:
         logs = tmp_path / "logs"
@@ -68,9 +68,9 @@ def test_a_link_cut_longer_than_zenoh_s_lease_mid_file(tmp_path: Path) -> None:
         while not (part.exists() and part.stat().st_size > alog // 3):
             assert time.monotonic() < deadline, collect.lines[-10:]
             time.sleep(0.1)
-        link.set_cut(True)
+        link.cut()
         time.sleep(15.0)
-        link.set_cut(False)
+        link.restore()
         collect.wait_for(f"{SESSION} complete", timeout=180)
         same_tree(session, archive / "alpha" / SESSION)
         assert any("link is down" in line for _, line in collect.lines)  # the lease ran out
@@ -78,5 +78,5 @@ def test_a_link_cut_longer_than_zenoh_s_lease_mid_file(tmp_path: Path) -> None:
         for proc in reversed(started):
             proc.stop()
         link.close()
-        for ns in (vehicle_ns, shore_ns):
-            subprocess.run(["ip", "netns", "del", ns], capture_output=True, check=False)
+        vehicle.close()
+        shore.close()
