@@ -45,7 +45,7 @@ RADIO_SNDBUF = 16384
 SHORE_BATCH = 16384
 #: two links across the radio, by Zenoh priority (0 control ... 7 background): control,
 #: commands and status (interactive) on one, with a small send buffer; data and bulk
-#: transfers (fetch ranges and grep ask at data_low) on the other, with the kernel's: the
+#: transfers (fetch ranges and grep ask at background) on the other, with the kernel's: the
 #: TCP buffers and retransmissions of a fetch never delay a command
 URGENT_PRIORITIES = "0-4"
 BULK_PRIORITIES = "5-7"
