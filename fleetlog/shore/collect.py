@@ -226,6 +226,8 @@ class _Worker:
             try:
                 self.round()
             except FleetlogError as err:
+                if self.cancel.is_set():
+                    return  # stopped: what is in flight stays for the next start, no error
                 self.error = str(err)
                 c.note_error(self.vehicle, str(err))
                 if c.options.once or not c.is_up(self.vehicle):
@@ -643,7 +645,8 @@ class Collector:
         with self._places_lock:
             places = list(self._places.values())
         for place in places:
-            if place.dirty or force:
+            # a transfer's progress changes without marking the record: saved while in flight
+            if place.dirty or force or place.record.in_flight:
                 try:
                     place.save()
                 except StorageError as err:
