@@ -26,8 +26,19 @@ from fleetlog.cli.options import (
     session_options,
 )
 from fleetlog.cli.settings import settings
-from fleetlog.errors import UsageError
+from fleetlog.errors import FormatError, MissionError, UsageError
 from fleetlog.moos.mission import LoggerConfig, Mission, parse_mission
+from fleetlog.moos.param_check import check_logger_block
+from fleetlog.moos.recording_modes import (
+    MAX_NOTES,
+    MAX_TAGS,
+    MIN_SPLIT_DURATION,
+    MIN_SPLIT_SIZE,
+    RecordingModes,
+    check_tag,
+    parse_note,
+)
+from fleetlog.moos.units import parse_duration, parse_size
 from fleetlog.query.server import LogServer
 from fleetlog.recorder.engine import Recorder
 from fleetlog.recorder.service import QUEUE, RecorderService, ServiceOptions
@@ -63,16 +74,28 @@ def read_mission(mission: Path) -> Mission:
     return parse_mission(text, str(mission), env=os.environ)
 
 
-def load_config(mission: Path | None, app_name: str) -> LoggerConfig:
+def load_config(mission: Path | None, app_name: str, *, strict: bool = False) -> LoggerConfig:
     """Read the pLogger configuration from a mission file, or pLogger's defaults without one.
+
+    What pLogger would read silently wrong (an unknown parameter, a ``Log =`` period that is
+    not a number) is printed as a warning, or refused with ``strict``.
 
     Raises:
         UsageError: the mission file cannot be read.
-        MissionError: the mission file is malformed (names the file and line).
+        MissionError: the mission file is malformed (names the file and line), or with
+            ``strict``, holds a line pLogger would read silently wrong.
     """
     if mission is None:
         return LoggerConfig.default(app_name)
     parsed = read_mission(mission)
+    warnings = check_logger_block(parsed.block(app_name), parsed.path)
+    if warnings and strict:
+        first = warnings[0]
+        more = f" (and {len(warnings) - 1} more)" if len(warnings) > 1 else ""
+        msg = f"{first.reason}{more}; --strict refuses it"
+        raise MissionError(msg, first.path, first.lineno)
+    for warning in warnings:
+        print(f"fleetlog: warning: {warning}", file=sys.stderr)
     if parsed.block(app_name) is None:
         # pLogger then logs every variable (§6.4), which a misspelt --app-name or block hides.
         print(
@@ -81,6 +104,65 @@ def load_config(mission: Path | None, app_name: str) -> LoggerConfig:
             file=sys.stderr,
         )
     return parsed.logger_config(app_name)
+
+
+def recording_modes(
+    base: RecordingModes,
+    *,
+    split_size: str | None,
+    split_duration: str | None,
+    paused: bool,
+    notes: list[str],
+    tags: list[str],
+    file_timestamp: bool,
+) -> RecordingModes:
+    """Return the mission's recording modes with the command line's options over them.
+
+    A ``--note`` replaces the mission's note of the same key; ``--tag`` adds to its tags.
+
+    Raises:
+        UsageError: an option's value cannot be used (the message names the option).
+    """
+    size, duration = base.split_size, base.split_duration
+    try:
+        if split_size is not None:
+            size = parse_size(split_size, name="--split-size") or None
+            if size is not None and size < MIN_SPLIT_SIZE:
+                msg = f"--split-size {split_size!r} is below the smallest part, 1MB"
+                raise UsageError(msg)
+        if split_duration is not None:
+            duration = parse_duration(split_duration, name="--split-duration") or None
+            if duration is not None and duration < MIN_SPLIT_DURATION:
+                msg = f"--split-duration {split_duration!r} is below the shortest part, 1s"
+                raise UsageError(msg)
+        merged = dict(base.notes)
+        for text in notes:
+            key, value = parse_note(text)
+            merged.pop(key, None)
+            merged[key] = value
+    except FormatError as err:
+        raise UsageError(str(err)) from None
+    all_tags = list(base.tags)
+    for tag in (t.strip() for text in tags for t in text.split(",")):
+        why = check_tag(tag)
+        if why is not None:
+            msg = f"--tag {tag[:80]!r}: {why}"
+            raise UsageError(msg)
+        if tag not in all_tags:
+            all_tags.append(tag)
+    if len(merged) > MAX_NOTES or len(all_tags) > MAX_TAGS:
+        msg = f"at most {MAX_NOTES} notes and {MAX_TAGS} tags"
+        raise UsageError(msg)
+    if (size or duration) and not file_timestamp:
+        msg = "splitting needs time-stamped session names (the mission sets FileTimeStamp = false)"
+        raise UsageError(msg)
+    return RecordingModes(
+        split_size=size,
+        split_duration=duration,
+        start_paused=paused or base.start_paused,
+        notes=tuple(merged.items()),
+        tags=tuple(all_tags),
+    )
 
 
 def _default_vehicle() -> str:
@@ -193,6 +275,54 @@ def record(
             ),
         ),
     ] = QUEUE,
+    split_size: Annotated[
+        str | None,
+        typer.Option(
+            "--split-size",
+            metavar="SIZE",
+            help="Start the next part of the session when its files hold SIZE on disk"
+            " (500MB, 2GiB; at least 1MB; 0: never) [default: the mission's SplitSize].",
+            show_default=False,
+        ),
+    ] = None,
+    split_duration: Annotated[
+        str | None,
+        typer.Option(
+            "--split-duration",
+            metavar="TIME",
+            help="Start the next part of the session after TIME (600, 10min, 1h; at least"
+            " 1s; 0: never) [default: the mission's SplitDuration].",
+            show_default=False,
+        ),
+    ] = None,
+    paused: Annotated[
+        bool,
+        typer.Option(
+            "--paused",
+            help="Start paused: open the session, write nothing until a RESUME (PLOGGER_CMD"
+            " or fleetlog recorder-ctl resume).",
+        ),
+    ] = False,
+    note: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--note",
+            metavar="KEY:VALUE",
+            help="A note on every session (repeatable; over the mission's Note of that key).",
+        ),
+    ] = None,
+    tag: Annotated[
+        list[str] | None,
+        typer.Option("--tag", metavar="TAG", help="A tag on every session (repeatable, or a, b)."),
+    ] = None,
+    strict: Annotated[
+        bool,
+        typer.Option(
+            "--strict",
+            help="Refuse a mission whose pLogger block has a parameter no one knows or a"
+            " Log period that is not a number (warnings otherwise).",
+        ),
+    ] = False,
     no_serve: Annotated[
         bool,
         typer.Option(
@@ -221,7 +351,19 @@ def record(
     zopts = dataclasses.replace(
         session_options(mode, connect, listen, config, no_multicast_scouting), keep_trying=True
     )
-    cfg = load_config(mission, app_name)
+    cfg = load_config(mission, app_name, strict=strict)
+    cfg = dataclasses.replace(
+        cfg,
+        modes=recording_modes(
+            cfg.modes,
+            split_size=split_size,
+            split_duration=split_duration,
+            paused=paused,
+            notes=note or [],
+            tags=tag or [],
+            file_timestamp=cfg.file_timestamp,
+        ),
+    )
     if vehicle is not None:
         checked_vehicle(vehicle, "--vehicle")
     machine_vehicle = settings().get("vehicle")
@@ -275,6 +417,8 @@ def record(
             )
         for warning in current.warnings if current is not None else ():
             print(f"fleetlog: warning: {warning}", file=sys.stderr)
+        if cfg.modes.start_paused:
+            print("fleetlog: paused: nothing is written until a RESUME", file=sys.stderr)
         print(
             f"fleetlog: recording vehicle {veh!r} into {where} (Ctrl-C to stop)",
             file=sys.stderr,

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal
 
 from fleetlog.errors import MissionError
+from fleetlog.moos.recording_modes import RecordingModes, read_recording_modes
 from fleetlog.moos.settings import FLOAT_RE as _FLOAT_RE
 from fleetlog.moos.settings import INT_RE as _INT_RE
 from fleetlog.moos.settings import SQUEEZE_ALL as _SQUEEZE_ALL
@@ -146,6 +147,8 @@ def parse_log_spec(text: str, *, lineno: int | None = None, path: str | None = N
 # --------------------------------------------------------------------------------------------
 # pLogger's configuration
 
+_NO_MODES = RecordingModes()
+
 
 @dataclass(frozen=True, slots=True)
 class LoggerConfig:
@@ -193,6 +196,8 @@ class LoggerConfig:
         fsync_interval: fleetlog's own block parameter ``FsyncInterval = seconds`` (default
             1): how often the open session's files are synced to the disk (``0``: only when
             the session closes).
+        modes: fleetlog's recording modes (``SplitSize``, ``SplitDuration``, ``StartPaused``,
+            ``Note``, ``Tag``; :mod:`fleetlog.moos.recording_modes`).
     """
 
     app_name: str = "pLogger"
@@ -221,6 +226,7 @@ class LoggerConfig:
     copy_file_dirs: tuple[str, ...] = ()
     moos_time_warp: float = 1.0
     fsync_interval: float = 1.0
+    modes: RecordingModes = _NO_MODES
 
     @classmethod
     def default(cls, app_name: str = "pLogger") -> LoggerConfig:
@@ -442,11 +448,12 @@ def logger_config(mission: Mission, app_name: str = "pLogger") -> LoggerConfig:
                 item.strip(_TRIM) for item in param.value.split(",") if item.strip(_TRIM)
             )
 
+    file_timestamp = reader.boolean("FileTimeStamp", True)
     return LoggerConfig(
         app_name=app_name,
         file=reader.file_name("File", "MOOSLog", stem=True),
         path=path,
-        file_timestamp=reader.boolean("FileTimeStamp", True),
+        file_timestamp=file_timestamp,
         utc_log_directories=reader.boolean("UTCLogDirectories", False),
         async_log=wildcard or reader.boolean("AsyncLog", True),
         sync_log=sync_log,
@@ -471,4 +478,5 @@ def logger_config(mission: Mission, app_name: str = "pLogger") -> LoggerConfig:
         copy_file_dirs=tuple(copy_dirs),
         moos_time_warp=_time_warp(mission),
         fsync_interval=_fsync_interval(reader),
+        modes=read_recording_modes(block, mission.path, file_timestamp=file_timestamp),
     )

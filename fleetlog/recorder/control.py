@@ -22,7 +22,8 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-from fleetlog.errors import StorageError
+from fleetlog.errors import FormatError, StorageError
+from fleetlog.moos.recording_modes import parse_note
 from fleetlog.recorder.pruning import Pruner
 from fleetlog.storage.metafile import append_ack
 from fleetlog.wire.control import CommandRecord, ControlRequest, Outcome
@@ -48,8 +49,10 @@ __all__ = [
 RING_SIZE = 64
 #: control commands waiting for the drain thread; more are refused at once
 QUEUE_LIMIT = 16
-#: commands that fleetlog will take once recording modes exist (issue 17)
-NOT_YET = ("pause", "resume", "split", "snapshot")
+#: commands that fleetlog will take once snapshot mode exists (issue 17)
+NOT_YET = ("snapshot",)
+#: PLOGGER_CMD's fleetlog tasks that take no value (docs/compat.md, "Recording modes")
+_MODE_TASKS = ("PAUSE", "RESUME", "SPLIT")
 #: commands run in the control thread (they do not touch what is being recorded)
 _IN_CONTROL_THREAD = ("status", "ack", *NOT_YET)
 
@@ -170,6 +173,12 @@ class CommandHandler:
             return Outcome.refused(
                 "?", f"{var} is {len(value)} characters long: at most {MAX_COMMAND}"
             )
+        bare = value.strip(" \t\r\n").upper()
+        if bare in _MODE_TASKS:
+            return self._mode(bare.lower())
+        head, sep, rest = value.partition("=")
+        if sep and head.strip(" \t").upper() == "NOTE":
+            return self._note_text(rest)
         text = value.replace(" ", "").replace("\t", "")
         task, sep, argument = text.partition("=")
         if not sep:
@@ -184,6 +193,22 @@ class CommandHandler:
         return Outcome.refused(
             task.lower()[:_QUOTE] or "?", f"dynamic command {task[:_QUOTE]} is not supported"
         )
+
+    def _mode(self, cmd: str) -> Outcome:
+        rec = self._rec
+        if cmd == "pause":
+            return rec.pause()
+        if cmd == "resume":
+            return rec.resume()
+        return rec.split()
+
+    def _note_text(self, text: str) -> Outcome:
+        """``NOTE=key:value`` (blanks around the key and the value are trimmed)."""
+        try:
+            key, value = parse_note(text)
+        except FormatError as err:
+            return Outcome.refused("note", err.reason)
+        return self._rec.note(key, value)
 
     # -- control requests
 
@@ -257,7 +282,7 @@ class CommandHandler:
         if cmd == "ack":
             return self._ack(request)
         return Outcome.refused(
-            cmd, f"{cmd} is not supported yet by this recorder (it comes with recording modes)"
+            cmd, f"{cmd} is not supported yet by this recorder (it comes with snapshot mode)"
         )
 
     def _run_engine(self, request: ControlRequest) -> Outcome:
@@ -271,6 +296,8 @@ class CommandHandler:
             return rec.copy_file(args["path"])
         if cmd == "note":
             return rec.note(args["key"], args["value"])
+        if cmd in ("pause", "resume", "split"):
+            return self._mode(cmd)
         return Outcome.refused(cmd, f"{cmd} is not a recorder command")
 
     def _ack(self, request: ControlRequest) -> Outcome:

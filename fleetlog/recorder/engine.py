@@ -35,7 +35,8 @@ from fleetlog.recorder.control import (
     quote,
 )
 from fleetlog.recorder.losses import LossLedger
-from fleetlog.recorder.sessions import Background, Health, MetaState, SessionKeeping, inline
+from fleetlog.recorder.modes import ModeKeeping, ModeState
+from fleetlog.recorder.sessions import Background, Health, MetaState, inline
 from fleetlog.recorder.stats import RecorderStats
 from fleetlog.storage.metafile import boot_id, host_name
 from fleetlog.storage.procinfo import ProcessMonitor
@@ -97,11 +98,13 @@ class _AppStatus:
     """What CMOOSApp's status says beyond the counters: CPU and memory, posts, subscriptions."""
 
     proc: ProcessMonitor = field(default_factory=ProcessMonitor)
+    #: when the app started (its Uptime)
+    started: float = 0.0
     published: set[str] = field(default_factory=set)
     subscribed: set[str] = field(default_factory=set)
 
 
-class Recorder(SessionKeeping):
+class Recorder(ModeKeeping):
     """One vehicle's pLogger: sessions on disk from a stream of MOOS messages.
 
     Args:
@@ -145,7 +148,6 @@ class Recorder(SessionKeeping):
         self.stats = RecorderStats()
         #: LOGSTART: taken at construction, before Zenoh connects, as CMOOSApp does
         self.logstart = clock()
-        self.started = self.logstart
         variant = Variant.EM if config.variant == "em" else Variant.IVP
         self._fmt = LineFormatter(
             variant, config.double_precision, mark_data_type=config.mark_data_type
@@ -177,7 +179,9 @@ class Recorder(SessionKeeping):
         #: what LOG_REQUEST and COPY_FILE_REQUEST have used of their bounds
         self._limits = _CommandLimits()
         #: CMOOSApp's status fields: CPU and memory, what it posts, what it receives
-        self._app = _AppStatus()
+        self._app = _AppStatus(started=self.logstart)
+        #: split, pause, notes (recorder/modes.py)
+        self._modes = ModeState.of(config.modes, self.logstart)
         #: losses not yet marked in a log (docs/compat.md, PLOGGER_GAP)
         self.losses = LossLedger()
         self._h = Health()
@@ -207,6 +211,7 @@ class Recorder(SessionKeeping):
             "queue": self._h.queue,
             "commands": self.commands.recent(),
             "wire": WIRE_VERSION,
+            **self.modes_status(),
         }
 
     # ---------------------------------------------------------------------------------------
@@ -286,10 +291,13 @@ class Recorder(SessionKeeping):
             var.last_logged = now
         verdict = var.verdict
         session = self.session
-        if session is None:
+        if session is None or self._modes.paused:
             if verdict is not Verdict.IGNORE or var.system:
-                stats.lost += 1
-                self.losses.add(self._h.broken or "no-session", 1, now, name=name)
+                if self._modes.paused:
+                    stats.paused += 1  # not written, by the operator's choice: not lost
+                else:
+                    stats.lost += 1
+                    self.losses.add(self._h.broken or "no-session", 1, now, name=name)
             if is_command:
                 self.commands.moos(msg)
             return
@@ -535,6 +543,7 @@ class Recorder(SessionKeeping):
         if (
             self.synclog is not None
             and self.session is not None
+            and not self._modes.paused
             and now - self._timers.last_row > self.config.sync_period
         ):
             self._timers.last_row = now
@@ -557,6 +566,7 @@ class Recorder(SessionKeeping):
             self.post(self.app_name.upper() + "_STATUS", self.status_text(now))
             self._end_lag_period()
         self._session_tick(now)
+        self._modes_tick(now)
         # Compressed streams close a frame only when flushed a second after the last one;
         # flushing on every tick keeps that bound when no more samples arrive.
         self.flush()
@@ -606,14 +616,14 @@ class Recorder(SessionKeeping):
         publishing = "".join(f"{n}," for n in sorted(self._app.published))
         subscribing = "".join(f"{n}," for n in sorted(subscribed))
         return (
-            f"AppErrorFlag={'true' if s.lost else 'false'},Uptime={now - self.started:.6g},"
+            f"AppErrorFlag={'true' if s.lost else 'false'},Uptime={now - self._app.started:.6g},"
             f"{self._app.proc.fields()},"
             f"MOOSName={self.app_name},Community={self.vehicle},"
             f'Publishing="{publishing}",Subscribing="{subscribing}",'
             f"LogAuxSrc={'true' if self.config.log_aux_src else 'false'},"
             f"Received={s.received},Logged={s.logged},Excluded={s.excluded},"
             f"Throttled={s.throttled},Skewed={s.skewed},Garbled={s.garbled},Lost={s.lost},"
-            f"Missed={s.missed},TypeClashes={s.type_clashes},WriteErrors={s.write_errors},"
+            f"Missed={s.missed},Paused={s.paused},TypeClashes={s.type_clashes},WriteErrors={s.write_errors},"
             f"Sessions={s.sessions},Directory={directory}"
         )
 

@@ -51,8 +51,6 @@ RETRY_FIRST = 1.0
 RETRY_MAX = 8.0
 #: a file system with less free space than this is not worth a retry yet
 MIN_FREE_BYTES = 1 << 20
-#: notes one session may hold
-MAX_NOTES = 64
 
 #: runs file work the drain thread must not wait for (fsync, metadata) in order, elsewhere
 Background = Callable[[Callable[[], None]], None]
@@ -152,6 +150,10 @@ class SessionKeeping:
     def _write_slog(self, text: str, patch: SlotPatch | None = None) -> None:
         raise NotImplementedError
 
+    def _identity(self, now: float) -> dict[str, Any]:
+        """Return a new session's ``mission_id``, ``part`` (and notes, tags): see modes.py."""
+        return {"mission_id": uuid.uuid4().hex, "part": 1}
+
     @property
     def broken(self) -> str | None:
         """Why no session is open after a failure (None while writing works)."""
@@ -248,13 +250,12 @@ class SessionKeeping:
             opened=now,
             logstart=self.logstart,
             updated=now,
-            mission_id=uuid.uuid4().hex,
-            part=1,
             counters=self._session_counters(),
             clock=clock_state(now),
             host=self._m.host,
             pid=os.getpid(),
             boot=self._m.boot,
+            **self._identity(now),
         )
         # Visible at once (without waiting for the disk), so the session is never without
         # its state; made durable by the background writer right after.
@@ -412,18 +413,6 @@ class SessionKeeping:
         if meta is not None:
             gaps = meta.gaps if len(meta.gaps) < MAX_GAPS else meta.gaps[1:]
             self._update_meta(now, gaps=(*gaps, gap))
-
-    def note(self, key: str, value: str) -> Outcome:
-        """Set a note on the open session (its metadata's ``notes``)."""
-        meta = self._m.meta
-        if meta is None or self.session is None:
-            return Outcome.refused("note", "no session is open")
-        if not key.strip() or any(ord(c) < 32 for c in key):
-            return Outcome.refused("note", "a note's key must be printable text")
-        if key not in meta.notes and len(meta.notes) >= MAX_NOTES:
-            return Outcome.refused("note", f"a session holds at most {MAX_NOTES} notes")
-        self._update_meta(self._clock(), notes={**meta.notes, key: value})
-        return Outcome.done("note", f"noted {key} on session {self.session.root}")
 
     def _storage_failed(self, err: FleetlogError, *, lost: int, fallback: bool = True) -> None:
         """Count, report and fall back: a full or read-only disk must not stop the recorder.

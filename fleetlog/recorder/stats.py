@@ -23,6 +23,8 @@ class RecorderStats:
     #: samples that publishers with sample-miss detection (DROP) sent but never arrived;
     #: those of variables the recorder logs are also in ``lost``
     missed: int = 0
+    #: samples not written because recording was paused (by the operator: not lost)
+    paused: int = 0
     #: samples whose type differs from their variable's first (MOOS keeps the first type;
     #: the recorder logs both)
     type_clashes: int = 0

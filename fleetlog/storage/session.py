@@ -419,6 +419,14 @@ class SessionWriter:
         """Return the longest flushed text waited to become readable (compressed), and reset."""
         return max((s.take_wait() for s in self._streams), default=0.0)
 
+    def disk_bytes(self) -> int:
+        """Return the bytes the session's log files hold on disk (what reached the OS)."""
+        total = 0
+        for stream in self._streams:
+            with contextlib.suppress(OSError, ValueError):
+                total += os.fstat(stream.fileno()).st_size
+        return total
+
     def paths(self) -> list[Path]:
         """Return the session's files: its logs and the copies made into it."""
         return (

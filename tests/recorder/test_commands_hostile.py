@@ -255,8 +255,8 @@ def test_a_subscription_the_transport_refuses_refuses_the_request(tmp_path: Path
 def test_control_refusals_are_reported_on_moos_debug(rig: Rig) -> None:
     replies: list[Outcome] = []
     rig.posted.clear()
-    rig.rec.commands.submit(ControlRequest("pause", text='{"cmd": "pause"}'), replies.append)
+    rig.rec.commands.submit(ControlRequest("snapshot", text='{"cmd": "snapshot"}'), replies.append)
     (reply,) = replies
     assert not reply.ok
-    assert any("pause" in text and "refused" in text for text in rig.debugs())
+    assert any("snapshot" in text and "refused" in text for text in rig.debugs())
     rig.close()

@@ -104,11 +104,15 @@ def test_control_requests_go_through_the_same_handler(
     noted = rig.control({"cmd": "note", "key": "site", "value": "bay"})
     assert noted.ok
     assert rig.meta().notes == {"site": "bay"}
-    for cmd in ("pause", "resume", "split", "snapshot"):
-        out = rig.control({"cmd": cmd})
-        assert not out.ok
-        assert out.why is not None
-        assert "not supported yet" in out.why
+    assert rig.control({"cmd": "pause"}).extra["paused"] is True
+    assert rig.control({"cmd": "resume"}).extra["paused"] is False
+    rig.clock.t += 2.0
+    split = rig.control({"cmd": "split"})
+    assert (split.ok, split.extra["part"]) == (True, 2)
+    out = rig.control({"cmd": "snapshot"})
+    assert not out.ok
+    assert out.why is not None
+    assert "not supported yet" in out.why
     status = rig.control({"cmd": "status"})
     assert status.ok
     assert status.extra["vehicle"] == "alpha"

@@ -138,10 +138,10 @@ def test_control_commands_and_the_ring_over_zenoh(
     copied = ask(zenoh_session, {"cmd": "copy_file", "path": str(tmp_path / "notes.txt")})
     assert isinstance(copied, dict)
     assert copied["did"] == f"copying {tmp_path / 'notes.txt'} to notes._txt"
-    paused = ask(zenoh_session, {"cmd": "pause"})
-    assert isinstance(paused, dict)
-    assert (paused["ok"], paused["did"]) == (False, "")
-    assert "not supported yet" in paused["why"]
+    snapshot = ask(zenoh_session, {"cmd": "snapshot"})
+    assert isinstance(snapshot, dict)
+    assert (snapshot["ok"], snapshot["did"]) == (False, "")
+    assert "not supported yet" in snapshot["why"]
     bad = ask(zenoh_session, {"cmd": "frobnicate"})
     assert isinstance(bad, str)
     assert bad.startswith("unknown command 'frobnicate'")
@@ -168,7 +168,7 @@ def test_control_commands_and_the_ring_over_zenoh(
         ("control", "note", True),
         ("control", "note", True),
         ("control", "copy_file", True),
-        ("control", "pause", False),
+        ("control", "snapshot", False),
         ("control", "?", False),
         ("control", "?", False),
         ("PLOGGER_CMD", "log_request", True),

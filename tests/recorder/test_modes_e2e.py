@@ -1,0 +1,154 @@
+"""Split and pause in ``fleetlog record`` as a real process, at full rate on loopback Zenoh.
+
+The parts of a split recording hold every published sample exactly once, in order; a pause
+writes nothing and counts what it did not write.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+
+import pytest
+from alog_oracle import iter_entries
+from helpers import Proc
+
+from fleetlog.api import Vehicle
+from fleetlog.storage.metafile import read_meta
+from fleetlog.transport.session import SessionOptions, open_session
+
+MISSION = "Community = alpha\nProcessConfig = pLogger\n{{\n  Log = N @ 0\n{extra}}}\n"
+
+
+@pytest.fixture
+def record(tmp_path: Path, endpoint: str, cli_env: dict[str, str]) -> Iterator[Callable[..., Proc]]:
+    started: list[Proc] = []
+
+    def start(*args: str, extra: str = "") -> Proc:
+        (tmp_path / "m.moos").write_text(MISSION.format(extra=extra))
+        rec = Proc(
+            ["record", "m.moos", *args, "-l", endpoint, "--no-multicast-scouting"],
+            tmp_path,
+            cli_env,
+        )
+        started.append(rec)
+        rec.wait_for("recording")
+        return rec
+
+    yield start
+    for rec in started:
+        rec.close()
+
+
+def vehicle(endpoint: str) -> Vehicle:
+    return Vehicle(
+        "alpha",
+        source="iTest",
+        options=SessionOptions(connect=(endpoint,), multicast_scouting=False),
+    )
+
+
+def parts_in_order(where: Path) -> list[Path]:
+    dirs = [d for d in where.iterdir() if d.is_dir()]
+    metas = {d: read_meta(d) for d in dirs}
+    ids = {m.mission_id for m in metas.values() if m is not None}
+    assert len(ids) == 1  # one mission
+    ordered = sorted(dirs, key=lambda d: metas[d].part)  # type: ignore[union-attr]
+    assert [metas[d].part for d in ordered] == list(range(1, len(dirs) + 1))  # type: ignore[union-attr]
+    return ordered
+
+
+def logged(directory: Path) -> list[float | str | bytes]:
+    with open(directory / f"{directory.name}.alog", encoding="utf-8", newline="") as f:
+        return [e.value for e in iter_entries(f) if e.key == "N"]
+
+
+def test_split_by_size_at_full_rate_loses_nothing(
+    record: Callable[..., Proc], tmp_path: Path, endpoint: str
+) -> None:
+    rec = record(extra="  SplitSize = 1MB\n")
+    count = 30_000
+    pad = "x" * 80
+    with vehicle(endpoint) as v:
+        assert v.wait_for_subscriber("N", timeout=10.0)
+        for i in range(count):
+            v.publish("N", f"{i} {pad}")
+        assert v.confirm(timeout=30.0)
+    assert rec.stop(timeout=10.0) == 0
+    parts = parts_in_order(tmp_path)
+    assert len(parts) >= 3
+    got = [value for part in parts for value in logged(part)]
+    assert got == [f"{i} {pad}" for i in range(count)]
+    assert "lost 0 in" in rec.stderr
+    hint = (tmp_path / ".LastOpenedMOOSLogDirectory").read_text()
+    assert parts[-1].name in hint
+    for part in parts:
+        meta = read_meta(part)
+        assert meta is not None
+        assert meta.state == "closed"
+        assert meta.counters["lost"] == 0
+
+
+def test_split_by_duration_at_full_rate_loses_nothing(
+    record: Callable[..., Proc], tmp_path: Path, endpoint: str
+) -> None:
+    rec = record("--split-duration", "1s")
+    sent = 0
+    with vehicle(endpoint) as v:
+        assert v.wait_for_subscriber("N", timeout=10.0)
+        until = time.monotonic() + 2.6
+        while time.monotonic() < until:
+            for _ in range(500):
+                v.publish("N", float(sent))
+                sent += 1
+        assert v.confirm(timeout=30.0)
+    assert rec.stop(timeout=10.0) == 0
+    parts = parts_in_order(tmp_path)
+    assert len(parts) >= 3
+    got = [value for part in parts for value in logged(part)]
+    assert got == [float(i) for i in range(sent)]
+    assert all(logged(part) for part in parts[:2])
+
+
+def test_pause_and_resume_over_the_control_service(
+    record: Callable[..., Proc], tmp_path: Path, endpoint: str
+) -> None:
+    rec = record("--paused")
+    assert "paused" in rec.stderr
+
+    def ask(request: dict[str, object]) -> dict[str, object]:
+        with open_session(SessionOptions(connect=(endpoint,), multicast_scouting=False)) as z:
+            (reply,) = list(
+                z.get("fleet/alpha/@fleetlog/control", payload=json.dumps(request).encode())
+            )
+            return json.loads(reply.ok.payload.to_bytes())  # type: ignore[union-attr, no-any-return]
+
+    with vehicle(endpoint) as v:
+        assert v.wait_for_subscriber("N", timeout=10.0)
+        for i in range(100):
+            v.publish("N", float(i))
+        assert v.confirm(timeout=10.0)
+        time.sleep(0.2)
+        status = ask({"cmd": "status"})
+        assert status["paused"] is True
+        assert status["paused_samples"] >= 100  # type: ignore[operator]
+        assert status["lost"] == 0
+        assert ask({"cmd": "resume"})["ok"] is True
+        for i in range(100, 200):
+            v.publish("N", float(i))
+        assert v.confirm(timeout=10.0)
+        time.sleep(0.2)
+        assert ask({"cmd": "pause"})["did"] == "paused recording"
+        for i in range(200, 300):
+            v.publish("N", float(i))
+        assert v.confirm(timeout=10.0)
+        time.sleep(0.2)
+    assert rec.stop(timeout=10.0) == 0
+    (session,) = parts_in_order(tmp_path)
+    assert logged(session) == [float(i) for i in range(100, 200)]
+    meta = read_meta(session)
+    assert meta is not None
+    assert meta.counters["paused"] >= 200
+    assert meta.counters["lost"] == 0
