@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import datetime as dt
 import sys
-from collections.abc import Collection, Mapping
+from collections.abc import Collection, Mapping, Sequence
+from typing import Any
 
 from rich.console import Console
 from rich.table import Table
@@ -115,20 +116,58 @@ def fleet_table(
 def sessions_table(sessions: list[SessionInfo], latest: str | None) -> Table:
     """The ``fleetlog sessions V`` table, oldest first; the latest marked ``*``."""
     table = Table(box=None, pad_edge=False)
-    for column in ("", "SESSION", "STARTED", "DURATION", "VARS", "FILES", "SIZE", "STATE"):
-        table.add_column(column, no_wrap=True)
+    split = any((info.part or 1) > 1 for info in sessions)
+    noted = any(info.notes or info.tags for info in sessions)
+    columns = ["", "SESSION", "STARTED", "DURATION", "VARS", "FILES", "SIZE", "STATE"]
+    columns += ["PART"] if split else []
+    columns += ["NOTES"] if noted else []
+    for column in columns:
+        table.add_column(column, no_wrap=column != "NOTES")
     for info in sessions:
-        table.add_row(
+        row: list[str | Text] = [
             "*" if info.name == latest else "",
-            info.name,
+            plain(info.name),
             human_time(info.start),
             human_duration(info.duration),
             "-" if info.variables is None else str(info.variables),
             str(len(info.files)),
             human_size(info.size),
             session_state(info),
-        )
+        ]
+        if split:
+            row.append("-" if info.part is None else str(info.part))
+        if noted:
+            row.append(plain(notes_text(info.notes, info.tags)))
+        table.add_row(*row)
     return table
+
+
+def mission_text(meta: Mapping[str, Any]) -> str | None:
+    """``part 2 of mission 3f2a…; notes: site=bay #trial`` from a metadata file's JSON, if any.
+
+    The file may be anything (a log from elsewhere): fields of the wrong type are left out.
+    """
+    parts = []
+    part, mission = meta.get("part"), meta.get("mission_id")
+    if isinstance(part, int) and not isinstance(part, bool) and isinstance(mission, str):
+        parts.append(f"part {part} of mission {mission[:12]}")
+    notes = meta.get("notes")
+    tags = meta.get("tags")
+    notes = {
+        k: v for k, v in (notes.items() if isinstance(notes, dict) else ()) if isinstance(v, str)
+    }
+    tags = [t for t in (tags if isinstance(tags, list) else ()) if isinstance(t, str)]
+    if notes or tags:
+        parts.append("notes: " + notes_text(notes, tags, width=400))
+    return "; ".join(parts) or None
+
+
+def notes_text(notes: Mapping[str, str], tags: Sequence[str], width: int = 60) -> str:
+    """``site=bay, crew=2 #trial #night``, cut to about ``width`` characters."""
+    text = ", ".join(f"{k}={v}" for k, v in notes.items())
+    if tags:
+        text = (text + " " if text else "") + " ".join(f"#{t}" for t in tags)
+    return text if len(text) <= width else text[: width - 1] + "…"
 
 
 def session_state(info: SessionInfo) -> str:

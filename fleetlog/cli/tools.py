@@ -14,7 +14,14 @@ import typer
 from rich.table import Table
 
 from fleetlog.cli.app import app
-from fleetlog.cli.tables import console, err_console, human_duration, human_time
+from fleetlog.cli.tables import (
+    console,
+    err_console,
+    human_duration,
+    human_time,
+    mission_text,
+    plain,
+)
 from fleetlog.errors import UsageError
 from fleetlog.storage.columnar import Errors
 from fleetlog.storage.select import Selection
@@ -125,6 +132,9 @@ def info(
             state = report.session.get("state", "?")
             clock = report.session.get("clock", report.session.get("clock_sync"))
             out.print(f"session state {state}" + (f", clock {clock}" if clock else ""))
+            mission = mission_text(report.session)
+            if mission:
+                out.print(plain(mission))
         if report.gap_count:
             out.print(f"[yellow]{report.gap_count} gap report(s) (PLOGGER_GAP)[/yellow]")
             for text in report.gaps[:10]:

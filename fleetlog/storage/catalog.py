@@ -292,6 +292,10 @@ class LogCatalog:
             alog=_alog_of(session, [name for name, _ in files]),
             state=self.state(session, meta),
             synced=synced if isinstance(synced, bool) else None,
+            mission_id=meta.mission_id if meta is not None else None,
+            part=meta.part if meta is not None else None,
+            notes=dict(meta.notes) if meta is not None else {},
+            tags=tuple(meta.tags) if meta is not None else (),
         )
         if brief or info.alog is None:
             return info
@@ -309,6 +313,10 @@ class LogCatalog:
             variables=details.variables,
             state=info.state,
             synced=info.synced,
+            mission_id=info.mission_id,
+            part=info.part,
+            notes=info.notes,
+            tags=info.tags,
         )
 
     def sessions(self, *, brief: bool = False) -> list[SessionInfo]:

@@ -9,12 +9,14 @@ a reply from a peer that lies is refused, never half-read. The requests these an
 
 from __future__ import annotations
 
+import itertools
 import json
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from fleetlog.errors import FormatError
+from fleetlog.moos.recording_modes import MAX_NOTES, MAX_TAGS, check_note, check_tag
 from fleetlog.wire.keys import check_component
 from fleetlog.wire.version import WIRE_VERSION, version_of
 
@@ -156,6 +158,10 @@ class SessionInfo:
             died with it open); None for a session without metadata (real pLogger's).
         synced: whether the recording host's clock was synchronised when the session
             opened (session metadata); None when unknown.
+        mission_id: the mission it is a part of and ``part`` its number (session metadata;
+            the parts of a split share the mission id); None without metadata.
+        notes: its notes and ``tags`` its tags (session metadata; at most 64 each, as the
+            recorder keeps them; a reply's others are left out).
     """
 
     name: str
@@ -169,6 +175,10 @@ class SessionInfo:
     variables: int | None = None
     state: str | None = None
     synced: bool | None = None
+    mission_id: str | None = None
+    part: int | None = None
+    notes: Mapping[str, str] = field(default_factory=dict)
+    tags: tuple[str, ...] = ()
 
     @property
     def size(self) -> int:
@@ -188,6 +198,10 @@ class SessionInfo:
             "variables": self.variables,
             "state": self.state,
             "synced": self.synced,
+            "mission_id": self.mission_id,
+            "part": self.part,
+            "notes": dict(self.notes),
+            "tags": list(self.tags),
             "size": self.size,
             "files": [f.as_json() for f in self.files],
         }
@@ -226,7 +240,29 @@ class SessionInfo:
             _opt(obj, "variables", int, what),
             _opt(obj, "state", str, what),
             _opt(obj, "synced", bool, what),
+            _opt(obj, "mission_id", str, what),
+            _opt(obj, "part", int, what),
+            _notes(obj.get("notes")),
+            _tags(obj.get("tags")),
         )
+
+
+def _notes(value: Any) -> dict[str, str]:
+    """The notes of a reply: string keys and values within the recorder's bounds, 64 at most."""
+    if not isinstance(value, dict):
+        return {}
+    kept = {
+        k: v
+        for k, v in itertools.islice(value.items(), MAX_NOTES)
+        if isinstance(k, str) and isinstance(v, str) and check_note(k, v) is None
+    }
+    return kept
+
+
+def _tags(value: Any) -> tuple[str, ...]:
+    if not isinstance(value, list):
+        return ()
+    return tuple(t for t in value[:MAX_TAGS] if isinstance(t, str) and check_tag(t) is None)
 
 
 def sessions_to_json(

@@ -7,13 +7,14 @@ writes nothing and counts what it did not write.
 from __future__ import annotations
 
 import json
+import subprocess
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
 from alog_oracle import iter_entries
-from helpers import Proc
+from helpers import Proc, run_cli
 
 from fleetlog.api import Vehicle
 from fleetlog.storage.metafile import read_meta
@@ -152,3 +153,45 @@ def test_pause_and_resume_over_the_control_service(
     assert meta is not None
     assert meta.counters["paused"] >= 200
     assert meta.counters["lost"] == 0
+
+
+def test_the_shore_commands_the_recorder_and_sees_its_notes(
+    record: Callable[..., Proc], tmp_path: Path, endpoint: str, cli_env: dict[str, str]
+) -> None:
+    record("--note", "site:the bay", "--tag", "trial", extra="  Note = crew:2\n")
+    shore = ("-e", endpoint, "--no-multicast-scouting")
+
+    def ctl(*args: str) -> subprocess.CompletedProcess[str]:
+        return run_cli("recorder-ctl", *args, "-v", "alpha", *shore, cwd=tmp_path, env=cli_env)
+
+    noted = ctl("note", "event: hit a buoy")
+    assert noted.returncode == 0, noted.stderr
+    assert noted.stdout.startswith("alpha: noted event on session")
+    split = ctl("split")
+    assert split.returncode == 0, split.stderr
+    assert "started part 2 of the mission" in split.stdout
+    paused = ctl("pause", "--json")
+    assert json.loads(paused.stdout)["paused"] is True
+    refused = ctl("snapshot")
+    assert refused.returncode == 1
+    assert "not supported yet" in refused.stdout
+    assert "1 of 1 recorder(s) refused" in refused.stderr
+    bad = ctl("note", "nocolon")
+    assert bad.returncode == 1
+    assert "is not key:value" in bad.stderr
+    listed = run_cli("sessions", "alpha", *shore, cwd=tmp_path, env=cli_env)
+    assert listed.returncode == 0, listed.stderr
+    assert "PART" in listed.stdout
+    assert "event=hit a buoy" in listed.stdout
+    assert "#trial" in listed.stdout
+    rows = run_cli("sessions", "alpha", "--json", *shore, cwd=tmp_path, env=cli_env)
+    found = [json.loads(line) for line in rows.stdout.splitlines()]
+    assert [(s["part"], s["notes"]) for s in found] == [
+        (1, {"crew": "2", "site": "the bay", "event": "hit a buoy"}),
+        (2, {"crew": "2", "site": "the bay", "event": "hit a buoy"}),
+    ]
+    first = tmp_path / found[0]["name"]
+    info = run_cli("info", str(first), cwd=tmp_path, env=cli_env)
+    assert info.returncode == 0, info.stderr
+    assert "part 1 of mission" in info.stdout
+    assert "event=hit a buoy" in info.stdout
