@@ -35,10 +35,12 @@ __all__ = [
     "message_times",
     "mission_texts",
     "moos_names",
+    "note_texts",
     "payloads",
     "plogger_cmds",
     "query_parameters",
     "selector_keys",
+    "sizes_and_durations",
 ]
 
 #: characters that break line formats, column splitting or escaping
@@ -241,6 +243,8 @@ def query_parameters(draw: st.DrawFn) -> str:
 # Commands
 
 _TASKS = ["LOG_REQUEST", "COPY_FILE_REQUEST", "log_request", "Copy_File_Request", "NOPE", ""]
+#: the recording-mode words of PLOGGER_CMD (issue 17), and near misses
+_MODE_WORDS = ["PAUSE", "RESUME", "SPLIT", "pause", " Resume ", "SPLIT=1", "PAUSED", "NOTE"]
 _PATHS = [
     "m.moos",
     ".ssh/id_rsa",
@@ -265,11 +269,15 @@ _PATHS = [
 @st.composite
 def plogger_cmds(draw: st.DrawFn) -> str | float | bytes:
     """PLOGGER_CMD values: well-formed requests with hostile arguments, and garbage."""
-    choice = draw(st.integers(0, 9))
+    choice = draw(st.integers(0, 11))
     if choice == 0:
         return draw(st.floats(allow_nan=True) | st.binary(max_size=8))
     if choice == 1:
         return draw(hostile_text)
+    if choice == 10:
+        return draw(st.sampled_from(_MODE_WORDS))
+    if choice == 11:
+        return draw(note_texts().map(lambda note: "NOTE=" + note))
     task = draw(st.sampled_from(_TASKS) | st.text(max_size=10))
     if task.upper() == "COPY_FILE_REQUEST":
         argument = draw(st.sampled_from(_PATHS) | hostile_text)
@@ -282,6 +290,29 @@ def plogger_cmds(draw: st.DrawFn) -> str | float | bytes:
         argument = var + tail + draw(st.sampled_from(["", " monitor", " NOSYNC monitor"]))
     sep = draw(st.sampled_from(["=", " = ", "==", ""]))
     return task + sep + argument
+
+
+@st.composite
+def note_texts(draw: st.DrawFn) -> str:
+    """``key:value`` texts (NOTE=, --note, ``Note =``): fine, huge, colonless, unprintable."""
+    key = draw(st.sampled_from(["site", "event", "", " ", "k" * 65]) | hostile_text)
+    value = draw(st.sampled_from(["bay", "a: b", "", "v" * 1025]) | hostile_text)
+    sep = draw(st.sampled_from([":", " : ", "", "::", "="]))
+    return key + sep + value
+
+
+#: ``SplitSize`` / ``SplitDuration`` / ``--split-*`` values: numbers, units, overflow, garbage
+sizes_and_durations = st.one_of(
+    st.sampled_from(
+        ["500MB", "2 GiB", "10min", "1.5h", "90", "0", "1e999", "1e308GB", ".5kB", "5 5", "-1s"]
+    ),
+    st.builds(
+        lambda n, unit: f"{n}{unit}",
+        st.floats(allow_nan=True, allow_infinity=True) | st.integers(-(10**30), 10**30),
+        st.sampled_from(["", "B", "kb", "MiB", "GB", "TB", "s", "min", "h", "d", "furlong"]),
+    ),
+    hostile_text,
+)
 
 
 #: control-request payloads: JSON objects with known and unknown commands and argument types
@@ -347,6 +378,12 @@ _SETTINGS = [
     "AppTick",
     "MOOSTimeWarp",
     "Community",
+    "SplitSize",
+    "SplitDuration",
+    "StartPaused",
+    "Note",
+    "Tag",
+    "WildcardLoging",
 ]
 _VALUES = [
     "true",
@@ -367,6 +404,14 @@ _VALUES = [
     "zstd",
     "true @ 0.2",
     "true @ -5",
+    "500MB",
+    "1 GiB",
+    "10min",
+    "1e999h",
+    "0.5",
+    "site:bay",
+    ":v",
+    "a, b,,c",
 ]
 
 

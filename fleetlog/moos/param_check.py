@@ -107,6 +107,7 @@ def check_logger_block(block: ProcessBlock | None, path: str) -> list[MissionErr
         shown = param.name if len(param.name) <= 80 else param.name[:80] + "…"
         msg = f"unknown pLogger parameter {shown!r} is ignored ({hint})"
         found.append(MissionError(msg, path, param.lineno))
+    written = {param.lineno: param.value for param in block.params}
     for param in block.raw_values("Log"):
         head = param.value.translate(SQUEEZE_ALL).partition("@")[2].partition(",")[0]
         period = _FLAGS.sub("", head)
@@ -114,8 +115,9 @@ def check_logger_block(block: ProcessBlock | None, path: str) -> list[MissionErr
             continue
         used = c_atof(head)
         shown = period if len(period) <= 40 else period[:40] + "…"
+        line = written.get(param.lineno, param.value)[:80]
         msg = (
-            f"Log = {param.value[:80]}: the period {shown!r} is not a number; "
+            f"Log = {line}: the period {shown!r} is not a number; "
             f"pLogger reads it as {used:g} s" + (" (every post)" if used == 0 else "")
         )
         found.append(MissionError(msg, path, param.lineno))

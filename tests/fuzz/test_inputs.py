@@ -364,10 +364,12 @@ class _CommandRig:
         self.subscribed += 1
 
     def probe(self) -> None:
-        """A plain sample is still logged after whatever came before."""
-        before = self.rec.stats.logged
+        """A plain sample is still logged after whatever came before (or counted paused)."""
+        stats = self.rec.stats
+        before = stats.logged + stats.paused
         self.rec.handle(MoosMessage("NAV_X", 1.0, self.clock.t, "iOk", "", "V"))
-        assert self.rec.stats.logged == before + 1
+        assert stats.logged + stats.paused == before + 1
+        assert stats.lost == 0
         assert self.subscribed <= MAX_LOG_REQUESTS
 
     def check_no_leak(self) -> None:

@@ -195,3 +195,25 @@ def test_the_shore_commands_the_recorder_and_sees_its_notes(
     assert info.returncode == 0, info.stderr
     assert "part 1 of mission" in info.stdout
     assert "event=hit a buoy" in info.stdout
+
+
+def test_misspelt_parameters_warn_and_strict_refuses(
+    tmp_path: Path, endpoint: str, cli_env: dict[str, str], record: Callable[..., Proc]
+) -> None:
+    extra = "  WildcardLoging = true\n  Log = X @ fast\n"
+    (tmp_path / "m.moos").write_text(MISSION.format(extra=extra))
+    refused = run_cli("record", "m.moos", "--strict", "-l", endpoint, cwd=tmp_path, env=cli_env)
+    assert refused.returncode == 1
+    assert refused.stderr == (
+        "fleetlog: error: m.moos:5: unknown pLogger parameter 'WildcardLoging' is ignored"
+        " (did you mean 'WildcardLogging'?) (and 1 more); --strict refuses it\n"
+    )
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["m.moos"]
+    bad = run_cli("record", "m.moos", "--split-size", "10kB", cwd=tmp_path, env=cli_env)
+    assert bad.returncode == 1
+    assert bad.stderr.endswith(
+        "\nfleetlog: error: --split-size '10kB' is below the smallest part, 1MB\n"
+    )
+    rec = record(extra=extra)
+    assert "warning: m.moos:5: unknown pLogger parameter 'WildcardLoging'" in rec.stderr
+    assert "warning: m.moos:6: Log = X @ fast: the period 'fast' is not a number" in rec.stderr
