@@ -71,7 +71,7 @@ def _detail(found: VehicleStatus, conflict: bool) -> None:
         ("state", found.state),
         ("session", found.session or "-"),
         ("directory", found.directory or "-"),
-        ("counters", ", ".join(f"{n} {c[n]}" for n in COUNTERS[:5] if n in c)),
+        ("counters", ", ".join(f"{n} {c[n]}" for n in (*COUNTERS[:5], "paused_samples") if n in c)),
         ("losses", ", ".join(f"{n} {c[n]}" for n in COUNTERS[5:11] if n in c)),
         ("disk free", _disk(found)),
         ("clock", _clock(found)),

@@ -172,6 +172,10 @@ def test_the_shore_commands_the_recorder_and_sees_its_notes(
     assert "started part 2 of the mission" in split.stdout
     paused = ctl("pause", "--json")
     assert json.loads(paused.stdout)["paused"] is True
+    status = run_cli("status", "alpha", *shore, cwd=tmp_path, env=cli_env)
+    assert status.returncode == 0, status.stderr
+    assert "paused" in status.stdout
+    assert "paused_samples" in status.stdout
     refused = ctl("snapshot")
     assert refused.returncode == 1
     assert "not supported yet" in refused.stdout
