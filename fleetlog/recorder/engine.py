@@ -623,7 +623,8 @@ class Recorder(ModeKeeping):
             f"LogAuxSrc={'true' if self.config.log_aux_src else 'false'},"
             f"Received={s.received},Logged={s.logged},Excluded={s.excluded},"
             f"Throttled={s.throttled},Skewed={s.skewed},Garbled={s.garbled},Lost={s.lost},"
-            f"Missed={s.missed},Paused={s.paused},TypeClashes={s.type_clashes},WriteErrors={s.write_errors},"
+            f"Missed={s.missed},Paused={s.paused},"
+            f"TypeClashes={s.type_clashes},WriteErrors={s.write_errors},"
             f"Sessions={s.sessions},Directory={directory}"
         )
 
