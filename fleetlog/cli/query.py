@@ -24,7 +24,7 @@ from fleetlog.cli.options import (
 from fleetlog.cli.shore import WAIT, Wait, open_client
 from fleetlog.errors import FormatError, QueryError, UsageError
 from fleetlog.moos.alog import Variant, format_entry
-from fleetlog.shore.client import GrepStream
+from fleetlog.shore.answers import GrepStream
 from fleetlog.wire.query import (
     DEFAULT_GREP_LIMIT,
     MAX_GREP_LIMIT,

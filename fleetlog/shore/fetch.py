@@ -37,7 +37,8 @@ from pathlib import Path
 from typing import TypeVar
 
 from fleetlog.errors import QueryError, StorageError
-from fleetlog.shore.client import FleetClient, PendingRange, TransientQueryError
+from fleetlog.shore.answers import PendingRange, TransientQueryError
+from fleetlog.shore.client import FleetClient
 from fleetlog.shore.pacing import FixedPacer, Pacer, RateLimit
 from fleetlog.storage.download import PartFile, sha256_file
 from fleetlog.wire.query import DEFAULT_RANGE, FileInfo, FileMeta, SessionInfo, check_component
