@@ -36,6 +36,7 @@ from fleetlog.cli.shore import WAIT, Expect, Wait, discover, finish, open_client
 from fleetlog.cli.tables import err_console, human_size
 from fleetlog.errors import FleetlogError, FormatError, QueryError, UsageError
 from fleetlog.shore import fetch as fetching
+from fleetlog.shore import transfer
 from fleetlog.shore.client import FleetClient
 from fleetlog.shore.report import FleetReport
 from fleetlog.wire.query import check_component
@@ -45,7 +46,7 @@ __all__ = ["fetch"]
 _MAX_PARALLEL = 8
 
 
-class _Bars(fetching.Progress):
+class _Bars(transfer.Progress):
     """One rich progress bar per vehicle (thread-safe: rich's Progress locks)."""
 
     def __init__(self, progress: Progress) -> None:

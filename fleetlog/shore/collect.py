@@ -38,8 +38,9 @@ from typing import Any
 
 from fleetlog.errors import FleetlogError, FormatError, QueryError, StorageError
 from fleetlog.shore.client import FleetClient
-from fleetlog.shore.fetch import FetchOutcome, Progress, fetch_session
+from fleetlog.shore.fetch import FetchOutcome, fetch_session
 from fleetlog.shore.pacing import LinkPacer, RateLimit
+from fleetlog.shore.transfer import Progress
 from fleetlog.storage.archive import (
     COMPLETE,
     CUT,
