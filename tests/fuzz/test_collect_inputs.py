@@ -21,7 +21,7 @@ from hostile import payloads
 from hypothesis import strategies as st
 
 from fleetlog.errors import FormatError
-from fleetlog.shore.collect import pruned_names
+from fleetlog.shore.collect_rounds import pruned_names
 from fleetlog.shore.control import ControlReply
 from fleetlog.storage.archive import check_vehicle_dir
 from fleetlog.storage.retention import read_acks

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 
 from fleetlog.cli.collect import parse_rate
 from fleetlog.errors import FormatError, StorageError, UsageError
-from fleetlog.shore.collect import plan_fetches
+from fleetlog.shore.collect_rounds import plan_fetches
 from fleetlog.shore.holdings import holdings
 from fleetlog.shore.pacing import LinkPacer, RateLimit
 from fleetlog.storage.archive import (
