@@ -16,7 +16,8 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from fleetlog.errors import FormatError
-from fleetlog.wire.query import check_component, parse_parameters
+from fleetlog.wire.keys import check_component
+from fleetlog.wire.parameters import parse_parameters
 
 __all__ = [
     "CONTROL",

@@ -1,7 +1,8 @@
 """The query services' protocol: keys, request parameters, reply shapes (docs/wire.md).
 
 Pure code, no zenoh: keys and parameter strings in, validated requests out. The reply shapes
-live in :mod:`fleetlog.wire.replies` and are re-exported here. The vehicle side
+live in :mod:`fleetlog.wire.replies` and the parameter codec in :mod:`fleetlog.wire.parameters`;
+both are re-exported here. The vehicle side
 (:mod:`fleetlog.query.server`) and the shore side (:mod:`fleetlog.shore.client`) both use it,
 so the two can never disagree.
 
@@ -30,13 +31,20 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass
-from urllib.parse import quote, unquote_to_bytes
 
 from fleetlog.errors import FormatError
 from fleetlog.moos.patterns import chunk_to_name, name_to_chunk
 from fleetlog.wire.keys import SERVICE, check_component, service_key
+from fleetlog.wire.parameters import (
+    flag_parameter,
+    format_parameters,
+    int_parameter,
+    parse_parameters,
+    split_server,
+    with_server,
+)
 from fleetlog.wire.replies import (
     REPLY_TARGET,
     SERVER,
@@ -115,13 +123,9 @@ MAX_RANGE = 4 << 20
 DEFAULT_GREP_LIMIT = 100_000
 MAX_GREP_LIMIT = 10_000_000
 #: bounds on what a request may carry, so a garbled one costs nothing to refuse
-MAX_PARAMETERS = 8192
 MAX_PATTERNS = 64
 MAX_OFFSET = 1 << 50
 
-_PERCENT = re.compile(r"%(?![0-9A-Fa-f]{2})")
-_INT = re.compile(r"[0-9]{1,16}")
-_ZID = re.compile(r"[0-9a-f]{1,32}")
 _FLOAT = re.compile(r"[-+]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][-+]?[0-9]+)?")
 
 
@@ -206,148 +210,6 @@ def parse_service_parts(key: str) -> tuple[str, tuple[str, ...]]:
 
 
 # --------------------------------------------------------------------------------------------
-# Parameters
-
-
-def parse_parameters(text: str, known: Iterable[str]) -> dict[str, str]:
-    """Split selector parameters ``a=1;b=x|y`` into a dict, percent-decoding the values.
-
-    Args:
-        text: the selector's parameters, as received.
-        known: the parameter names the service accepts.
-
-    Returns:
-        name → decoded value (a flag written without ``=`` has the value ``""``).
-
-    Raises:
-        FormatError: the text is too long, a parameter is unknown or given twice, or a value
-            holds a ``%`` that is not followed by two hex digits.
-    """
-    if len(text) > MAX_PARAMETERS:
-        msg = f"the parameters are {len(text)} characters long; at most {MAX_PARAMETERS}"
-        raise FormatError(msg)
-    allowed = frozenset(known)
-    out: dict[str, str] = {}
-    for item in text.split(";") if text else ():
-        if not item:
-            continue
-        name, _, raw = item.partition("=")
-        if name not in allowed:
-            expected = ", ".join(sorted(allowed)) or "none"
-            msg = f"unknown parameter {name[:40]!r}; this service takes {expected}"
-            raise FormatError(msg)
-        if name in out:
-            msg = f"parameter {name!r} is given twice"
-            raise FormatError(msg)
-        out[name] = _unquote(name, raw)
-    return out
-
-
-def _unquote(name: str, raw: str) -> str:
-    if _PERCENT.search(raw):
-        msg = f"parameter {name!r} holds a '%' that is not followed by two hex digits"
-        raise FormatError(msg)
-    # Percent escapes spell UTF-8 bytes; undecodable ones survive as surrogate escapes (and
-    # so does a raw one, which only a local caller can pass: Zenoh's selectors are UTF-8).
-    value = unquote_to_bytes(raw.encode("utf-8", "surrogateescape")).decode(
-        "utf-8", "surrogateescape"
-    )
-    if "\x00" in value:
-        msg = f"parameter {name!r} holds a NUL character"
-        raise FormatError(msg)
-    return value
-
-
-def _quote(value: str) -> str:
-    return quote(value.encode("utf-8", "surrogateescape"), safe="*?@:,.-_+~")
-
-
-def format_parameters(values: Mapping[str, str | int | float | bool | Sequence[str] | None]) -> str:
-    """Return selector parameters for a request; the inverse of :func:`parse_parameters`.
-
-    None and False are left out, True becomes ``name=1``, a sequence joins its quoted items
-    with ``|``.
-    """
-    items: list[str] = []
-    for name, value in values.items():
-        if value is None or value is False:
-            continue
-        if value is True:
-            items.append(f"{name}=1")
-        elif isinstance(value, str):
-            items.append(f"{name}={_quote(value)}")
-        elif isinstance(value, int | float):
-            items.append(f"{name}={value!r}")
-        else:
-            items.append(f"{name}=" + "|".join(_quote(v) for v in value))
-    return ";".join(items)
-
-
-def _int(params: Mapping[str, str], name: str, default: int, low: int, high: int) -> int:
-    text = params.get(name)
-    if text is None:
-        return default
-    if not _INT.fullmatch(text):
-        msg = f"parameter {name!r} must be a whole number of at most 16 digits, not {text[:40]!r}"
-        raise FormatError(msg)
-    value = int(text)
-    if not low <= value <= high:
-        msg = f"parameter {name!r} must be between {low} and {high}, not {value}"
-        raise FormatError(msg)
-    return value
-
-
-def _flag(params: Mapping[str, str], name: str) -> bool:
-    text = params.get(name)
-    if text is None or text in ("0", "false"):
-        return False
-    if text in ("", "1", "true"):
-        return True
-    msg = f"parameter {name!r} must be 1 or 0, not {text[:40]!r}"
-    raise FormatError(msg)
-
-
-def split_server(text: str) -> tuple[str | None, str]:
-    """Take the ``server=ZID`` parameter out of a request's parameters.
-
-    Returns:
-        The Zenoh id asked for (None if the request names none) and the other parameters,
-        for the service's own parser.
-
-    Raises:
-        FormatError: the parameters are too long, or the id is not 1-32 lower-case hex
-            digits.
-    """
-    if len(text) > MAX_PARAMETERS:
-        msg = f"the parameters are {len(text)} characters long; at most {MAX_PARAMETERS}"
-        raise FormatError(msg)
-    if SERVER not in text:
-        return None, text
-    server: str | None = None
-    rest: list[str] = []
-    for item in text.split(";"):
-        name, _, value = item.partition("=")
-        if name != SERVER:
-            rest.append(item)
-            continue
-        if server is not None:
-            msg = f"parameter {SERVER!r} is given twice"
-            raise FormatError(msg)
-        if not _ZID.fullmatch(value):
-            msg = f"parameter {SERVER!r} must be a Zenoh id (hex), not {value[:40]!r}"
-            raise FormatError(msg)
-        server = value
-    return server, ";".join(rest)
-
-
-def with_server(parameters: str, server: str | None) -> str:
-    """Return ``parameters`` with ``server=ZID`` added (unchanged for None)."""
-    if server is None:
-        return parameters
-    return f"{parameters};{SERVER}={server}" if parameters else f"{SERVER}={server}"
-
-
-# --------------------------------------------------------------------------------------------
 # Requests
 
 
@@ -379,7 +241,7 @@ def parse_sessions_request(text: str) -> SessionsRequest:
     session = params.get("session")
     if session is not None:
         check_component(session, "session")
-    return SessionsRequest(session, _flag(params, "brief"))
+    return SessionsRequest(session, flag_parameter(params, "brief"))
 
 
 @dataclass(frozen=True, slots=True)
@@ -411,12 +273,12 @@ def parse_file_request(text: str) -> FileRequest:
         FormatError: an unknown or garbled parameter, or a range longer than 4 MiB.
     """
     params = parse_parameters(text, ("offset", "length", "sha256"))
-    offset = _int(params, "offset", 0, 0, MAX_OFFSET)
-    length = _int(params, "length", DEFAULT_RANGE, 0, 1 << 53)
+    offset = int_parameter(params, "offset", 0, 0, MAX_OFFSET)
+    length = int_parameter(params, "length", DEFAULT_RANGE, 0, 1 << 53)
     if length > MAX_RANGE:
         msg = f"parameter 'length' asks for {length} bytes; a range holds at most {MAX_RANGE}"
         raise FormatError(msg)
-    return FileRequest(offset, length, _flag(params, "sha256"))
+    return FileRequest(offset, length, flag_parameter(params, "sha256"))
 
 
 @dataclass(frozen=True, slots=True)
@@ -526,5 +388,5 @@ def parse_grep_request(text: str) -> GrepRequest:
         _patterns(params, "source"),
         start,
         end,
-        _int(params, "limit", DEFAULT_GREP_LIMIT, 1, MAX_GREP_LIMIT),
+        int_parameter(params, "limit", DEFAULT_GREP_LIMIT, 1, MAX_GREP_LIMIT),
     )
