@@ -15,7 +15,7 @@ from fleetlog.errors import FleetlogError, FormatError
 from fleetlog.storage.files import read_small
 from fleetlog.transport.certs import read_certificate, signed_by
 from fleetlog.transport.session import SessionOptions, summarize
-from fleetlog.wire.access import parse_common_name
+from fleetlog.wire.access_profile import parse_common_name
 
 __all__ = ["EXPIRY_WARNING_DAYS", "Finding", "fleet_findings", "machine_findings"]
 

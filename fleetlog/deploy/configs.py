@@ -13,7 +13,7 @@ from typing import Any
 
 from fleetlog.deploy.fleet import SHORE, Fleet, Machine
 from fleetlog.deploy.json5 import render
-from fleetlog.wire.access import access_control
+from fleetlog.wire.access_profile import access_control
 
 __all__ = [
     "CA_FILE",

@@ -14,7 +14,8 @@ from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from fleetlog.errors import FormatError
-from fleetlog.wire.access import Identity, Profile, Role, check_name
+from fleetlog.wire.access import Role
+from fleetlog.wire.access_profile import Identity, Profile, check_name
 from fleetlog.wire.keys import check_root
 
 __all__ = [

@@ -14,7 +14,8 @@ from fleetlog.moos.patterns import name_to_chunk
 from fleetlog.storage.files import read_small
 from fleetlog.transport.certs import read_certificate
 from fleetlog.transport.session import SessionOptions, summarize
-from fleetlog.wire.access import Action, Identity, Role, grants_of, parse_common_name
+from fleetlog.wire.access import Action, Role, grants_of
+from fleetlog.wire.access_profile import Identity, parse_common_name
 
 __all__ = ["publish_refusal", "this_identity"]
 

@@ -32,7 +32,8 @@ from fleetlog.deploy.configs import (
 from fleetlog.deploy.fleet import SHORE, Fleet, Revoked
 from fleetlog.errors import FormatError, UsageError
 from fleetlog.storage.files import read_small, write_atomic
-from fleetlog.wire.access import Identity, Role
+from fleetlog.wire.access import Role
+from fleetlog.wire.access_profile import Identity
 
 __all__ = ["CERT_FILES", "FleetKit", "Renewal"]
 

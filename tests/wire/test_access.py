@@ -23,14 +23,16 @@ from fleetlog.wire.access import (
     MESSAGES,
     Action,
     Flow,
-    Identity,
     KeyRule,
-    Profile,
     Role,
-    access_control,
-    common_name,
     grants_of,
     messages_of,
+)
+from fleetlog.wire.access_profile import (
+    Identity,
+    Profile,
+    access_control,
+    common_name,
     parse_common_name,
 )
 
