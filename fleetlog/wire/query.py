@@ -1,8 +1,8 @@
 """The query services' protocol: keys, request parameters, reply shapes (docs/wire.md).
 
 Pure code, no zenoh: keys and parameter strings in, validated requests out. The reply shapes
-live in :mod:`fleetlog.wire.replies` and the parameter codec in :mod:`fleetlog.wire.parameters`;
-both are re-exported here. The vehicle side
+live in :mod:`fleetlog.wire.replies` and :mod:`fleetlog.wire.grep_lines`, the parameter codec
+in :mod:`fleetlog.wire.parameters`; all are re-exported here. The vehicle side
 (:mod:`fleetlog.query.server`) and the shore side (:mod:`fleetlog.shore.client`) both use it,
 so the two can never disagree.
 
@@ -36,6 +36,13 @@ from dataclasses import dataclass
 
 from fleetlog.errors import FormatError
 from fleetlog.moos.patterns import chunk_to_name, name_to_chunk
+from fleetlog.wire.grep_lines import (
+    GrepEnd,
+    GrepHeader,
+    GrepRecord,
+    decode_grep_lines,
+    encode_grep_line,
+)
 from fleetlog.wire.keys import SERVICE, check_component, service_key
 from fleetlog.wire.parameters import (
     flag_parameter,
@@ -50,13 +57,8 @@ from fleetlog.wire.replies import (
     SERVER,
     FileInfo,
     FileMeta,
-    GrepEnd,
-    GrepHeader,
-    GrepRecord,
     LatestInfo,
     SessionInfo,
-    decode_grep_lines,
-    encode_grep_line,
     sessions_by_server,
     sessions_from_json,
     sessions_to_json,

@@ -1,22 +1,23 @@
 """The query services' replies: JSON shapes both sides read and write (docs/wire.md).
 
 Pure code, no zenoh: file-range metadata, session lists (split over replies of about
-:data:`REPLY_TARGET` bytes), the latest session, and the remote grep's JSON lines. Every
-decoder checks each field's presence and type and raises :class:`FormatError` naming it, so
-a reply from a peer that lies is refused, never half-read. The requests these answer are in
+:data:`REPLY_TARGET` bytes), and the latest session; the remote grep's JSON lines are in
+:mod:`fleetlog.wire.grep_lines`. Every decoder checks each field's presence and type
+(:mod:`fleetlog.wire.json_fields`) and raises :class:`FormatError` naming it, so a reply
+from a peer that lies is refused, never half-read. The requests these answer are in
 :mod:`fleetlog.wire.query`, which re-exports every name here.
 """
 
 from __future__ import annotations
 
 import itertools
-import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
 from fleetlog.errors import FormatError
 from fleetlog.moos.recording_modes import MAX_NOTES, MAX_TAGS, check_note, check_tag
+from fleetlog.wire.json_fields import dump_json, load_object, optional_field, required_field
 from fleetlog.wire.keys import check_component
 from fleetlog.wire.version import WIRE_VERSION, version_of
 
@@ -25,13 +26,8 @@ __all__ = [
     "SERVER",
     "FileInfo",
     "FileMeta",
-    "GrepEnd",
-    "GrepHeader",
-    "GrepRecord",
     "LatestInfo",
     "SessionInfo",
-    "decode_grep_lines",
-    "encode_grep_line",
     "sessions_by_server",
     "sessions_from_json",
     "sessions_to_json",
@@ -42,35 +38,6 @@ __all__ = [
 SERVER = "server"
 #: how much JSON a sessions or grep reply carries before the next one starts
 REPLY_TARGET = 256 << 10
-
-
-def _get(obj: Mapping[str, Any], name: str, kind: type | tuple[type, ...], what: str) -> Any:
-    value = obj.get(name)
-    if not isinstance(value, kind) or (isinstance(value, bool) and kind in (int, float)):
-        msg = f"{what}: field {name!r} is missing or has the wrong type"
-        raise FormatError(msg)
-    return value
-
-
-def _opt(obj: Mapping[str, Any], name: str, kind: type | tuple[type, ...], what: str) -> Any:
-    return None if obj.get(name) is None else _get(obj, name, kind, what)
-
-
-def _load(data: bytes | str, what: str) -> dict[str, Any]:
-    try:
-        obj = json.loads(data)
-    except ValueError as err:
-        msg = f"{what} is not JSON: {err}"
-        raise FormatError(msg) from None
-    if not isinstance(obj, dict):
-        msg = f"{what} is not a JSON object"
-        raise FormatError(msg)
-    return obj
-
-
-def _dump(obj: object) -> bytes:
-    # ensure_ascii keeps surrogate-escaped bytes as \udcXX, which json.loads gives back.
-    return json.dumps(obj, separators=(",", ":")).encode("ascii")
 
 
 @dataclass(frozen=True, slots=True)
@@ -95,7 +62,7 @@ class FileMeta:
 
     def to_json(self) -> bytes:
         """Return the attachment bytes."""
-        return _dump(
+        return dump_json(
             {
                 "offset": self.offset,
                 "length": self.length,
@@ -114,14 +81,14 @@ class FileMeta:
             FormatError: not the shape above.
         """
         what = "file reply meta"
-        obj = _load(data, what)
+        obj = load_object(data, what)
         return cls(
-            _get(obj, "offset", int, what),
-            _get(obj, "length", int, what),
-            _get(obj, "size", int, what),
-            float(_get(obj, "mtime", (int, float), what)),
-            _get(obj, "complete", bool, what),
-            _opt(obj, "sha256", str, what),
+            required_field(obj, "offset", int, what),
+            required_field(obj, "length", int, what),
+            required_field(obj, "size", int, what),
+            float(required_field(obj, "mtime", (int, float), what)),
+            required_field(obj, "complete", bool, what),
+            optional_field(obj, "sha256", str, what),
         )
 
 
@@ -215,33 +182,33 @@ class SessionInfo:
         """
         what = "session"
         files = []
-        for item in _get(obj, "files", list, what):
+        for item in required_field(obj, "files", list, what):
             if not isinstance(item, dict):
                 msg = "session: a file entry is not an object"
                 raise FormatError(msg)
             files.append(
                 FileInfo(
-                    check_component(_get(item, "name", str, "file"), "file"),
-                    _get(item, "size", int, "file"),
-                    float(_get(item, "mtime", (int, float), "file")),
+                    check_component(required_field(item, "name", str, "file"), "file"),
+                    required_field(item, "size", int, "file"),
+                    float(required_field(item, "mtime", (int, float), "file")),
                 )
             )
-        start = _opt(obj, "start", (int, float), what)
-        duration = _opt(obj, "duration", (int, float), what)
+        start = optional_field(obj, "start", (int, float), what)
+        duration = optional_field(obj, "duration", (int, float), what)
         return cls(
-            check_component(_get(obj, "name", str, what), "session"),
+            check_component(required_field(obj, "name", str, what), "session"),
             tuple(files),
-            _get(obj, "complete", bool, what),
-            _opt(obj, "stamp", str, what),
-            _opt(obj, "alog", str, what),
+            required_field(obj, "complete", bool, what),
+            optional_field(obj, "stamp", str, what),
+            optional_field(obj, "alog", str, what),
             None if start is None else float(start),
             None if duration is None else float(duration),
-            _opt(obj, "vehicle", str, what),
-            _opt(obj, "variables", int, what),
-            _opt(obj, "state", str, what),
-            _opt(obj, "synced", bool, what),
-            _opt(obj, "mission_id", str, what),
-            _opt(obj, "part", int, what),
+            optional_field(obj, "vehicle", str, what),
+            optional_field(obj, "variables", int, what),
+            optional_field(obj, "state", str, what),
+            optional_field(obj, "synced", bool, what),
+            optional_field(obj, "mission_id", str, what),
+            optional_field(obj, "part", int, what),
             _notes(obj.get("notes")),
             _tags(obj.get("tags")),
         )
@@ -287,13 +254,13 @@ def sessions_to_json(
     for info in sessions:
         obj = info.as_json()
         batch.append(obj)
-        size += len(_dump(obj))
+        size += len(dump_json(obj))
         if size >= REPLY_TARGET:
             replies.append(
-                _dump({"vehicle": vehicle, **who, "sessions": batch, "more": True, **wire})
+                dump_json({"vehicle": vehicle, **who, "sessions": batch, "more": True, **wire})
             )
             batch, size = [], 0
-    replies.append(_dump({"vehicle": vehicle, **who, "sessions": batch, "more": False, **wire}))
+    replies.append(dump_json({"vehicle": vehicle, **who, "sessions": batch, "more": False, **wire}))
     return replies
 
 
@@ -309,15 +276,15 @@ def sessions_by_server(replies: Sequence[bytes]) -> dict[str | None, list[Sessio
     out: dict[str | None, list[SessionInfo]] = {}
     more: dict[str | None, bool] = {}
     for data in replies:
-        obj = _load(data, "sessions reply")
-        server = _opt(obj, SERVER, str, "sessions reply")
+        obj = load_object(data, "sessions reply")
+        server = optional_field(obj, SERVER, str, "sessions reply")
         found = out.setdefault(server, [])
-        for item in _get(obj, "sessions", list, "sessions reply"):
+        for item in required_field(obj, "sessions", list, "sessions reply"):
             if not isinstance(item, dict):
                 msg = "sessions reply: a session is not an object"
                 raise FormatError(msg)
             found.append(SessionInfo.from_json(item))
-        more[server] = _get(obj, "more", bool, "sessions reply")
+        more[server] = required_field(obj, "more", bool, "sessions reply")
     if not out or any(more.values()):
         msg = "the sessions replies ended before the last one (the link dropped?)"
         raise FormatError(msg)
@@ -370,7 +337,7 @@ class LatestInfo:
 
     def to_json(self) -> bytes:
         """Return the reply bytes."""
-        return _dump(
+        return dump_json(
             {
                 "vehicle": self.vehicle,
                 "session": self.session,
@@ -393,169 +360,18 @@ class LatestInfo:
             FormatError: not the shape above.
         """
         what = "latest reply"
-        obj = _load(data, what)
-        start = _opt(obj, "start", (int, float), what)
-        session = _opt(obj, "session", str, what)
+        obj = load_object(data, what)
+        start = optional_field(obj, "start", (int, float), what)
+        session = optional_field(obj, "session", str, what)
         return cls(
-            _get(obj, "vehicle", str, what),
+            required_field(obj, "vehicle", str, what),
             None if session is None else check_component(session, "session"),
-            _get(obj, "writing", bool, what),
-            _get(obj, "how", str, what),
-            _opt(obj, "hint", str, what),
+            required_field(obj, "writing", bool, what),
+            required_field(obj, "how", str, what),
+            optional_field(obj, "hint", str, what),
             None if start is None else float(start),
-            _opt(obj, "server", str, what),
-            _opt(obj, "recorder", str, what),
+            optional_field(obj, "server", str, what),
+            optional_field(obj, "recorder", str, what),
             version_of(obj),
-            _opt(obj, "synced", bool, what),
+            optional_field(obj, "synced", bool, what),
         )
-
-
-# -- grep: JSON lines, a header first and an end record last, entries in between
-
-
-@dataclass(frozen=True, slots=True)
-class GrepHeader:
-    """The first line of a grep stream: how to read and print the entries.
-
-    Attributes:
-        session: the session.
-        alog: the alog's file name.
-        logstart: LOGSTART, or None when the banner is unusable.
-        banner: the alog's banner lines, without newlines (aloggrep keeps them).
-        time_decimals: decimals of the file's time column (3 essential-moos, 5 MOOS-IvP).
-        mark_data_type: the file marks values ``D:``/``S:``.
-    """
-
-    session: str
-    alog: str
-    logstart: float | None
-    banner: tuple[str, ...] = ()
-    time_decimals: int = 5
-    mark_data_type: bool = False
-
-
-@dataclass(frozen=True, slots=True)
-class GrepRecord:
-    """One matching entry: time since LOGSTART, variable, source, type and value text.
-
-    ``kind`` is ``d`` (double), ``s`` (string) or ``b`` (binary: ``text`` is the
-    ``<MOOS_BINARY>`` reference); ``text`` is the value as written, without padding or
-    MarkDataType marker; ``lineno`` is where the entry starts in the file.
-    """
-
-    offset: float
-    key: str
-    source: str
-    kind: str
-    text: str
-    lineno: int
-
-
-@dataclass(frozen=True, slots=True)
-class GrepEnd:
-    """The last line of a grep stream.
-
-    Attributes:
-        matched: entries sent.
-        scanned: entries read.
-        truncated: the limit stopped the scan before the end of the file.
-        skipped: lines the reader could not use (see ``AlogReader.skipped``).
-        cut: the file ended inside an entry (being written, or a crash).
-    """
-
-    matched: int
-    scanned: int
-    truncated: bool
-    skipped: int = 0
-    cut: bool = False
-
-
-_KINDS = frozenset("dsb")
-
-
-def encode_grep_line(item: GrepHeader | GrepRecord | GrepEnd) -> bytes:
-    """Return one line of a grep stream, newline included."""
-    obj: object
-    if isinstance(item, GrepRecord):
-        obj = [item.offset, item.key, item.source, item.kind, item.text, item.lineno]
-    elif isinstance(item, GrepHeader):
-        obj = {
-            "header": True,
-            "session": item.session,
-            "alog": item.alog,
-            "logstart": item.logstart,
-            "banner": list(item.banner),
-            "time_decimals": item.time_decimals,
-            "mark_data_type": item.mark_data_type,
-        }
-    else:
-        obj = {
-            "end": True,
-            "matched": item.matched,
-            "scanned": item.scanned,
-            "truncated": item.truncated,
-            "skipped": item.skipped,
-            "cut": item.cut,
-        }
-    return _dump(obj) + b"\n"
-
-
-def _grep_record(obj: list[Any]) -> GrepRecord:
-    if (
-        len(obj) != 6
-        or not isinstance(obj[0], int | float)
-        or not all(isinstance(x, str) for x in obj[1:5])
-        or obj[3] not in _KINDS
-        or not isinstance(obj[5], int)
-    ):
-        msg = "grep reply: an entry is not [time, var, source, kind, text, line]"
-        raise FormatError(msg)
-    return GrepRecord(float(obj[0]), obj[1], obj[2], obj[3], obj[4], obj[5])
-
-
-def decode_grep_lines(data: bytes) -> list[GrepHeader | GrepRecord | GrepEnd]:
-    """Read one grep reply (several lines).
-
-    Raises:
-        FormatError: a line is not a header, an entry or an end record.
-    """
-    out: list[GrepHeader | GrepRecord | GrepEnd] = []
-    for line in data.splitlines():
-        if not line:
-            continue
-        try:
-            obj = json.loads(line)
-        except ValueError as err:
-            msg = f"grep reply: a line is not JSON: {err}"
-            raise FormatError(msg) from None
-        if isinstance(obj, list):
-            out.append(_grep_record(obj))
-        elif isinstance(obj, dict) and obj.get("header") is True:
-            what = "grep header"
-            logstart = _opt(obj, "logstart", (int, float), what)
-            banner = _get(obj, "banner", list, what)
-            out.append(
-                GrepHeader(
-                    _get(obj, "session", str, what),
-                    _get(obj, "alog", str, what),
-                    None if logstart is None else float(logstart),
-                    tuple(str(x) for x in banner),
-                    _get(obj, "time_decimals", int, what),
-                    _get(obj, "mark_data_type", bool, what),
-                )
-            )
-        elif isinstance(obj, dict) and obj.get("end") is True:
-            what = "grep end"
-            out.append(
-                GrepEnd(
-                    _get(obj, "matched", int, what),
-                    _get(obj, "scanned", int, what),
-                    _get(obj, "truncated", bool, what),
-                    _get(obj, "skipped", int, what),
-                    _get(obj, "cut", bool, what),
-                )
-            )
-        else:
-            msg = "grep reply: a line is neither a header, an entry nor an end record"
-            raise FormatError(msg)
-    return out

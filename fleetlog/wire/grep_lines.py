@@ -1,0 +1,170 @@
+"""The remote grep's reply stream: JSON lines, a header first, an end record last (docs/wire.md).
+
+Pure code. A grep answer is a run of replies of about
+:data:`~fleetlog.wire.replies.REPLY_TARGET` bytes, each holding whole lines: one
+:class:`GrepHeader` (how to read and print the entries), then one compact
+:class:`GrepRecord` per matching entry, then one :class:`GrepEnd` (what was scanned, whether
+the limit or a cut file stopped it). :func:`encode_grep_line` writes a line,
+:func:`decode_grep_lines` reads a reply's lines and refuses any field of the wrong type. The
+request is :class:`~fleetlog.wire.query.GrepRequest`; :mod:`fleetlog.wire.query` re-exports
+every name here.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from typing import Any
+
+from fleetlog.errors import FormatError
+from fleetlog.wire.json_fields import dump_json, optional_field, required_field
+
+__all__ = ["GrepEnd", "GrepHeader", "GrepRecord", "decode_grep_lines", "encode_grep_line"]
+
+
+@dataclass(frozen=True, slots=True)
+class GrepHeader:
+    """The first line of a grep stream: how to read and print the entries.
+
+    Attributes:
+        session: the session.
+        alog: the alog's file name.
+        logstart: LOGSTART, or None when the banner is unusable.
+        banner: the alog's banner lines, without newlines (aloggrep keeps them).
+        time_decimals: decimals of the file's time column (3 essential-moos, 5 MOOS-IvP).
+        mark_data_type: the file marks values ``D:``/``S:``.
+    """
+
+    session: str
+    alog: str
+    logstart: float | None
+    banner: tuple[str, ...] = ()
+    time_decimals: int = 5
+    mark_data_type: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class GrepRecord:
+    """One matching entry: time since LOGSTART, variable, source, type and value text.
+
+    ``kind`` is ``d`` (double), ``s`` (string) or ``b`` (binary: ``text`` is the
+    ``<MOOS_BINARY>`` reference); ``text`` is the value as written, without padding or
+    MarkDataType marker; ``lineno`` is where the entry starts in the file.
+    """
+
+    offset: float
+    key: str
+    source: str
+    kind: str
+    text: str
+    lineno: int
+
+
+@dataclass(frozen=True, slots=True)
+class GrepEnd:
+    """The last line of a grep stream.
+
+    Attributes:
+        matched: entries sent.
+        scanned: entries read.
+        truncated: the limit stopped the scan before the end of the file.
+        skipped: lines the reader could not use (see ``AlogReader.skipped``).
+        cut: the file ended inside an entry (being written, or a crash).
+    """
+
+    matched: int
+    scanned: int
+    truncated: bool
+    skipped: int = 0
+    cut: bool = False
+
+
+_KINDS = frozenset("dsb")
+
+
+def encode_grep_line(item: GrepHeader | GrepRecord | GrepEnd) -> bytes:
+    """Return one line of a grep stream, newline included."""
+    obj: object
+    if isinstance(item, GrepRecord):
+        obj = [item.offset, item.key, item.source, item.kind, item.text, item.lineno]
+    elif isinstance(item, GrepHeader):
+        obj = {
+            "header": True,
+            "session": item.session,
+            "alog": item.alog,
+            "logstart": item.logstart,
+            "banner": list(item.banner),
+            "time_decimals": item.time_decimals,
+            "mark_data_type": item.mark_data_type,
+        }
+    else:
+        obj = {
+            "end": True,
+            "matched": item.matched,
+            "scanned": item.scanned,
+            "truncated": item.truncated,
+            "skipped": item.skipped,
+            "cut": item.cut,
+        }
+    return dump_json(obj) + b"\n"
+
+
+def _grep_record(obj: list[Any]) -> GrepRecord:
+    if (
+        len(obj) != 6
+        or not isinstance(obj[0], int | float)
+        or not all(isinstance(x, str) for x in obj[1:5])
+        or obj[3] not in _KINDS
+        or not isinstance(obj[5], int)
+    ):
+        msg = "grep reply: an entry is not [time, var, source, kind, text, line]"
+        raise FormatError(msg)
+    return GrepRecord(float(obj[0]), obj[1], obj[2], obj[3], obj[4], obj[5])
+
+
+def decode_grep_lines(data: bytes) -> list[GrepHeader | GrepRecord | GrepEnd]:
+    """Read one grep reply (several lines).
+
+    Raises:
+        FormatError: a line is not a header, an entry or an end record.
+    """
+    out: list[GrepHeader | GrepRecord | GrepEnd] = []
+    for line in data.splitlines():
+        if not line:
+            continue
+        try:
+            obj = json.loads(line)
+        except ValueError as err:
+            msg = f"grep reply: a line is not JSON: {err}"
+            raise FormatError(msg) from None
+        if isinstance(obj, list):
+            out.append(_grep_record(obj))
+        elif isinstance(obj, dict) and obj.get("header") is True:
+            what = "grep header"
+            logstart = optional_field(obj, "logstart", (int, float), what)
+            banner = required_field(obj, "banner", list, what)
+            out.append(
+                GrepHeader(
+                    required_field(obj, "session", str, what),
+                    required_field(obj, "alog", str, what),
+                    None if logstart is None else float(logstart),
+                    tuple(str(x) for x in banner),
+                    required_field(obj, "time_decimals", int, what),
+                    required_field(obj, "mark_data_type", bool, what),
+                )
+            )
+        elif isinstance(obj, dict) and obj.get("end") is True:
+            what = "grep end"
+            out.append(
+                GrepEnd(
+                    required_field(obj, "matched", int, what),
+                    required_field(obj, "scanned", int, what),
+                    required_field(obj, "truncated", bool, what),
+                    required_field(obj, "skipped", int, what),
+                    required_field(obj, "cut", bool, what),
+                )
+            )
+        else:
+            msg = "grep reply: a line is neither a header, an entry nor an end record"
+            raise FormatError(msg)
+    return out
