@@ -392,6 +392,7 @@ def record(
             copy_dirs=tuple(dirs),
             attach=None if no_serve else _log_server(key_root, veh, cfg, zopts),
             watchdog=watchdog.kick if watchdog.enabled else None,
+            watchdog_every=(watchdog.interval or 3.0) / 3,
             queue=queue,
         ),
     )

@@ -571,6 +571,23 @@ class Recorder(ModeKeeping):
         # flushing on every tick keeps that bound when no more samples arrive.
         self.flush()
 
+    def due_in(self) -> float:
+        """Return how long :meth:`tick` has nothing to do (seconds; 0: call it now).
+
+        The drain thread sleeps that long when no sample comes (at most a second, so the
+        session directory's removal is still noticed), instead of polling.
+        """
+        if self._unflushed_since is not None:
+            return 0.0
+        now = self._clock()
+        timers = self._timers
+        due = min(timers.status + STATUS_INTERVAL, timers.monitor + MONITOR_INTERVAL)
+        if self._h.missed:
+            due = min(due, timers.missed + MISSED_REPORT_INTERVAL)
+        if self.synclog is not None and self.session is not None:
+            due = min(due, timers.last_row + self.config.sync_period)
+        return max(0.0, min(due, self._session_due(now)) - now)
+
     def _write_slog(self, text: str, patch: SlotPatch | None = None) -> None:
         session = self.session
         if session is None or session.slog is None:
@@ -645,8 +662,10 @@ class Recorder(ModeKeeping):
         if session is None:
             return
         now = self._clock()
-        if since is not None and now - since > self._h.lag:
-            self._h.lag = now - since
+        if since is not None:
+            self._h.unsynced = True
+            if now - since > self._h.lag:
+                self._h.lag = now - since
         if session.removed():
             self._session_removed(session, now)
             return

@@ -1,12 +1,10 @@
 """The recorder process: Zenoh in, the engine in one thread, files out.
 
-One thread drains the subscribers' FIFO channels (``try_recv``; no callback, no file I/O in
-Zenoh's threads), hands each sample to the :class:`~fleetlog.recorder.engine.Recorder`, and
-flushes plain logs as soon as the channels are empty, or within 5 ms of a line being written
-while they are not (the durability bound is 20 ms). A full FIFO makes Zenoh push back on
-BLOCK publishers instead of dropping. What the recorder posts itself goes out from a second
-thread, because its own subscriber may be the one that must be drained for that put to
-complete.
+One thread drains the subscribers' FIFO channels into the
+:class:`~fleetlog.recorder.engine.Recorder` (:mod:`fleetlog.recorder.drain`: no callback and no
+file I/O in Zenoh's threads; asleep when there is nothing to do). What the recorder posts
+itself goes out from a second thread, because its own subscriber may be the one that must be
+drained for that put to complete.
 """
 
 from __future__ import annotations
@@ -21,18 +19,16 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Protocol
 
 from fleetlog.errors import FleetlogError, FormatError, RecorderError, TransportError
 from fleetlog.moos.mission import LoggerConfig
 from fleetlog.moos.patterns import chunk_includes, name_to_chunk, reduce_chunks
 from fleetlog.recorder.background import BackgroundWriter
+from fleetlog.recorder.drain import Drain, Wake
 from fleetlog.recorder.engine import Recorder
 from fleetlog.storage.catalog import disk_space
 from fleetlog.transport.bus import (
-    MissCounter,
     MoosPublisher,
-    SampleDecoder,
     declare_fifo_subscriber,
     heartbeat_keys,
 )
@@ -45,7 +41,7 @@ from fleetlog.transport.queries import (
     session_zid,
 )
 from fleetlog.transport.services import live_vehicles
-from fleetlog.transport.session import SessionOptions, open_session, translate_zerror
+from fleetlog.transport.session import SessionOptions, open_session
 from fleetlog.wire.control import (
     CONTROL,
     MAX_REQUEST,
@@ -75,26 +71,6 @@ _MIN_FIFO = 512
 #: thread, and a flood of commands that filled a small FIFO would hold back the data behind
 #: it (tests/recorder/test_hostile.py); commands are rare otherwise
 COMMAND_QUEUE = 65536
-_FLUSH_DELAY = 0.005
-_TICK = 0.02
-#: inside a long drain batch, whether a flush is due is checked every this many samples
-#: (a power of two): at 6-10 µs per sample that is every 0.2-0.3 ms, and the check (0.11 µs)
-#: costs 0.003 µs per sample
-_CHECK_EVERY = 32
-#: the longest one subscriber's batch may hold the drain thread before the others get a
-#: turn: a flood of costly commands on one key must not hold back the variables on the rest
-_SLICE = 0.01
-
-
-class _Fifo(Protocol):
-    """What the service uses of a FIFO subscriber (declared by the transport layer)."""
-
-    @property
-    def handler(self) -> Any: ...
-
-    def try_recv(self) -> Any: ...
-
-    def undeclare(self) -> None: ...
 
 
 @dataclass
@@ -114,6 +90,9 @@ class ServiceOptions:
     #: called from the drain loop at every tick (``time.monotonic()``): feeds systemd's
     #: watchdog, so that a hung drain loop gets the service restarted, not only a dead one
     watchdog: Callable[[float], None] | None = None
+    #: the longest the drain loop may go without calling ``watchdog`` when idle (seconds):
+    #: a third of systemd's WatchdogSec
+    watchdog_every: float = 1.0
     #: samples received but not yet logged that the recorder may hold (all FIFOs together)
     queue: int = QUEUE
     #: once started, collect and then freeze the process's objects out of the cyclic GC
@@ -172,16 +151,12 @@ class RecorderService:
         self._stop = threading.Event()
         self.ready = threading.Event()
         self.recorder: Recorder | None = None
-        self._subscribers: list[_Fifo] = []
+        #: the drain thread's work (created with the recorder)
+        self._drain: Drain | None = None
         self._chunks: set[str] = set()
         self._requested_subscribers = 0
         self._session: ZenohSession | None = None
         self._var_prefix = f"{options.root}/{name_to_chunk(options.vehicle)}/var/"
-        #: samples DROP publishers lost on the way (sample-miss detection, docs/wire.md)
-        self._misses = MissCounter()
-        self._beats: _Fifo | None = None
-        #: when every subscriber was last seen empty (monotonic)
-        self._drained_at = 0.0
         #: each data subscriber's FIFO capacity
         self._fifo = max(_MIN_FIFO, options.queue)
         #: the key chunks of the command variables (their FIFO is COMMAND_QUEUE)
@@ -190,10 +165,14 @@ class RecorderService:
     def stop(self) -> None:
         """Ask the service to finish (safe from a signal handler or another thread)."""
         self._stop.set()
+        drain = self._drain
+        if drain is not None:
+            drain.wake.set()
 
     # ---------------------------------------------------------------------------------------
     def _subscribe_chunk(self, chunk: str) -> None:
         assert self._session is not None
+        assert self._drain is not None
         if any(chunk_includes(have, chunk) for have in self._chunks):
             # An overlapping second subscriber would deliver every sample twice (a LOG_REQUEST
             # for a variable a wildcard pattern already brings in, for example).
@@ -201,7 +180,7 @@ class RecorderService:
         self._chunks.add(chunk)
         capacity = COMMAND_QUEUE if chunk in self._command_chunks else self._fifo
         sub = declare_fifo_subscriber(self._session, self._var_prefix + chunk, capacity)
-        self._subscribers.append(sub)
+        self._drain.add(sub)
 
     def _subscribe_var(self, name: str) -> None:
         """A LOG_REQUEST asks for one more variable.
@@ -262,6 +241,10 @@ class RecorderService:
                 background=background.submit,
             )
             self.recorder = recorder
+            drain = Drain(
+                recorder, self._var_prefix, self._stop, opts.watchdog, opts.watchdog_every
+            )
+            self._drain = drain
             chunks = self._initial_chunks(recorder)
             self._command_chunks = {
                 name_to_chunk(recorder.commands.restart_var),
@@ -274,12 +257,12 @@ class RecorderService:
             for chunk in chunks:
                 self._subscribe_chunk(chunk)
             recorder.queue = self._fifo * max(1, len(data))
-            self._beats = declare_fifo_subscriber(session, heartbeat_keys(self._var_prefix + "*"))
+            drain.beats = declare_fifo_subscriber(session, heartbeat_keys(self._var_prefix + "*"))
             self._refuse_a_second_recorder(session)
             token = declare_token(session, service_key(opts.root, opts.vehicle, "recorder"))
             status_q = self._declare_status(session, recorder)
             recorder.start()
-            control_q = self._declare_control(session, recorder, outbox)
+            control_q = self._declare_control(session, recorder, outbox, drain.wake)
             if opts.attach is not None:
                 detach = opts.attach(session, recorder)
             if opts.freeze_gc:
@@ -288,32 +271,23 @@ class RecorderService:
             self.ready.set()
             if on_ready is not None:
                 on_ready(recorder)
-            self._loop(recorder)
+            drain.run()
             # What is still queued is logged; commands in it are no longer run (a flood of
             # them would hold the shutdown past its bound).
             recorder.commands.closing = True
-            self._drain(recorder, deadline=time.monotonic() + 2.0)
+            drain.finish(deadline=time.monotonic() + 2.0)
         finally:
             # No more commands; those still queued are refused, not left unanswered.
             for queryable in control_q:
                 queryable.undeclare()
             if recorder is not None:
                 recorder.commands.cancel_queued("the recorder is stopping")
-            # Stop reception first, then log what the closed channels still hold: a sample
-            # that reached the recorder is on disk (an undeclared subscriber's try_recv
-            # fails, its handler still yields what was queued).
-            handlers = [sub.handler for sub in self._subscribers]
-            if self._beats is not None:
-                self._subscribers.append(self._beats)
-                self._beats = None
-            for sub in self._subscribers:
-                with contextlib.suppress(TransportError), translate_zerror("undeclare"):
-                    sub.undeclare()
-            self._subscribers.clear()
             try:
                 if recorder is not None:
                     try:
-                        self._drain_closed(recorder, handlers)
+                        if self._drain is not None:
+                            # Stop reception, then log what the closed channels still hold.
+                            self._drain.close()
                     finally:
                         recorder.stop()
                 # The closed session's fsync and last metadata: before the process ends.
@@ -374,7 +348,7 @@ class RecorderService:
         return ServiceQueryable(session, key, answer)
 
     def _declare_control(
-        self, session: ZenohSession, recorder: Recorder, outbox: _Outbox
+        self, session: ZenohSession, recorder: Recorder, outbox: _Outbox, wake: Wake
     ) -> list[ServiceQueryable]:
         """The control service (docs/wire.md): read here, run by the one command handler.
 
@@ -416,148 +390,12 @@ class RecorderService:
                     outbox.call(lambda: send(outcome))  # never from the drain thread
 
             commands.submit(request, reply)
+            wake.set()  # a sleeping drain thread runs it now
 
         out: list[ServiceQueryable] = []
         for key in (control, f"{control}/{PRUNE}"):
             out.append(ServiceQueryable(session, key, functools.partial(on_query, key=key)))
         return out
-
-    def _pump(
-        self,
-        recv: Callable[[], Any],
-        recorder: Recorder,
-        decoder: SampleDecoder,
-        deadline: float | None = None,
-    ) -> int:
-        """Log every sample ``recv`` yields until it yields None (or ``deadline``); return how many.
-
-        Under a flood that never lets the channel empty, the deadline (monotonic, checked
-        every 256 samples) is what ends the pump.
-        """
-        count = 0
-        sample = recv()
-        while sample is not None:
-            if deadline is not None and not count & 255 and time.monotonic() > deadline:
-                break
-            info = sample.source_info
-            if info is not None:
-                self._misses.seen(info, sample)
-            incoming = decoder.decode(sample)
-            if incoming is not None:
-                recorder.handle(incoming.message, garbled=incoming.garbled)
-            else:
-                recorder.unreadable(str(sample.key_expr))
-            count += 1
-            sample = recv()
-        return count
-
-    def _drain(self, recorder: Recorder, deadline: float) -> None:
-        """Log what is still queued (shutdown): until the FIFOs stay empty or the deadline."""
-        decoder = SampleDecoder(self._var_prefix)
-        self._read_beats()
-        while time.monotonic() < deadline:
-            got = 0
-            for sub in self._subscribers:
-                with translate_zerror("subscriber"):
-                    got += self._pump(sub.try_recv, recorder, decoder, deadline)
-            if not got:
-                self._drained_at = time.monotonic()
-                break
-        self._fold_misses(recorder, decoder, min_age=0.0)
-        recorder.flush()
-
-    def _drain_closed(self, recorder: Recorder, handlers: list[Any]) -> None:
-        """Log what undeclared subscribers' channels still hold, until each is closed."""
-        decoder = SampleDecoder(self._var_prefix)
-        for handler in handlers:
-            # A closed, empty channel raises instead of returning None: that is its end.
-            with contextlib.suppress(TransportError), translate_zerror("subscriber"):
-                self._pump(handler.try_recv, recorder, decoder)
-        self._fold_misses(recorder, decoder, min_age=0.0)
-        recorder.flush()
-
-    def _read_beats(self) -> None:
-        """Hand the sample-miss heartbeats received so far to the miss counter."""
-        beats = self._beats
-        if beats is None:
-            return
-        with contextlib.suppress(TransportError), translate_zerror("heartbeats"):
-            beat = beats.try_recv()
-            while beat is not None:
-                self._misses.heartbeat(beat)
-                beat = beats.try_recv()
-
-    def _fold_misses(
-        self, recorder: Recorder, decoder: SampleDecoder, min_age: float | None = None
-    ) -> None:
-        """Count in the recorder what DROP publishers lost on the way (docs/wire.md)."""
-        misses = self._misses
-        misses.settle(self._drained_at, min_age)
-        for key, source, count in misses.take():
-            recorder.missed(decoder.name_of(key), source, count)
-
-    def _loop(self, recorder: Recorder) -> None:
-        decoder = SampleDecoder(self._var_prefix)
-        decode = decoder.decode
-        handle = recorder.handle
-        monotonic = time.monotonic
-        next_tick = 0.0
-        idle = 0
-        stop = self._stop
-        mask = _CHECK_EVERY - 1
-        seen = self._misses.seen
-        commands = recorder.commands
-        watchdog = self.options.watchdog
-        while not stop.is_set():
-            got = 0
-            for sub in self._subscribers:
-                try_recv = sub.try_recv
-                batch = 0
-                began = monotonic()
-                sample = try_recv()
-                while sample is not None:
-                    # Numbered samples (DROP publishers) are checked for gaps: 0.05 µs for
-                    # the others (bench/miss_detection.py).
-                    info = sample.source_info
-                    if info is not None:
-                        seen(info, sample)
-                    incoming = decode(sample)
-                    if incoming is not None:
-                        handle(incoming.message, garbled=incoming.garbled)
-                    else:
-                        recorder.unreadable(str(sample.key_expr))
-                    batch += 1
-                    if not batch & mask:
-                        if recorder.flush_due(_FLUSH_DELAY):
-                            recorder.flush()
-                        if monotonic() - began > _SLICE:
-                            break
-                    if batch >= 8192:
-                        break
-                    sample = try_recv()
-                got += batch
-            now = monotonic()
-            if recorder.flush_due(0.0 if not got else _FLUSH_DELAY):
-                recorder.flush()
-            if commands.pending:
-                # One control command per pass, between batches (as a PLOGGER_CMD costs).
-                commands.run_queued()
-            if not got:
-                self._drained_at = now
-            if now >= next_tick:
-                next_tick = now + _TICK
-                # Heartbeats read now are trusted once the FIFOs were seen empty after this.
-                self._read_beats()
-                self._fold_misses(recorder, decoder)
-                recorder.tick()
-                if watchdog is not None:
-                    watchdog(now)
-            if got:
-                idle = 0
-            else:
-                idle += 1
-                # Sleep briefly when idle; a line still reaches the OS within the bound.
-                time.sleep(0.001 if idle < 200 else 0.004)
 
 
 @dataclass

@@ -82,6 +82,8 @@ class Health:
     max_fsync: float = 0.0
     sync_due: float = 0.0
     sync_running: bool = False
+    #: lines reached the OS since the last fsync began (an idle session is not synced)
+    unsynced: bool = True
     #: when losses were last marked in the alog
     gaps_at: float = 0.0
     #: samples the transport may hold before the recorder takes them (set by the service)
@@ -267,6 +269,7 @@ class SessionKeeping:
         self._h.broken = None
         self._h.retry_wait = RETRY_FIRST
         self._h.sync_due = now + self.config.fsync_interval
+        self._h.unsynced = True  # its headers
         if session.fallback:
             self.debug(
                 f"could not create {self.config.path}/{session.root}: "
@@ -557,6 +560,8 @@ class SessionKeeping:
         if session is None or self._h.sync_running:
             return
         self._h.sync_running = True
+        # A compressed unit still open is synced once it has ended: it stays unsynced.
+        self._h.unsynced = session.unit_due() is not None
 
         def sync() -> None:
             started = time.monotonic()
@@ -584,12 +589,34 @@ class SessionKeeping:
         else:
             if self.losses and now - self._h.gaps_at >= GAP_INTERVAL:
                 self._write_gaps(now)
-            if self.config.fsync_interval > 0 and now >= self._h.sync_due:
+            if (
+                self.config.fsync_interval > 0
+                and now >= self._h.sync_due
+                and (self._h.unsynced or session.unit_due() is not None)
+            ):
                 self._sync(now)
         if now - self._m.meta_at >= META_INTERVAL and self._m.meta is not None:
             self._m.meta_at = now
             if self._session_counters() != self._m.meta_counters:
                 self._update_meta(now)
+
+    def _session_due(self, now: float) -> float:
+        """Return when :meth:`_session_tick` next has work (epoch; a second away at most)."""
+        session = self.session
+        if session is None:
+            return self._h.retry_at if self._h.broken is not None else now + 1.0
+        # The directory's removal is checked at least once a second.
+        due = now + 1.0
+        if self.losses:
+            due = min(due, self._h.gaps_at + GAP_INTERVAL)
+        if self.config.fsync_interval > 0 and self._h.unsynced:
+            due = min(due, self._h.sync_due)
+        unit = session.unit_due()
+        if unit is not None:
+            due = min(due, unit)
+        if self._m.meta is not None:
+            due = min(due, self._m.meta_at + META_INTERVAL)
+        return due
 
     def _end_lag_period(self) -> None:
         """A status period ends: its longest lag becomes the last period's."""

@@ -362,6 +362,11 @@ class SessionWriter:
         for stream in self._streams:
             stream.flush(now)
 
+    def unit_due(self) -> float | None:
+        """Return when a compressed stream's pending text is next due in a unit (or None)."""
+        dues = [due for stream in self._streams if (due := stream.unit_due()) is not None]
+        return min(dues, default=None)
+
     def sync(self) -> None:
         """Sync every open stream to the disk (what was flushed to the OS survives a power cut).
 

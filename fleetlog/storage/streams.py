@@ -111,6 +111,10 @@ class OutStream:
         """Return the file's descriptor (for fsync from another thread)."""
         raise NotImplementedError
 
+    def unit_due(self) -> float | None:
+        """Return when text flushed but not yet readable is due in a unit (compressed), or None."""
+        return None
+
     def take_wait(self) -> float:
         """Return the longest text waited after its flush to become readable, and reset it.
 
@@ -273,6 +277,12 @@ class _CompressedStream(OutStream):
             self._last = now
             self._wait = max(self._wait, now - self._since)
             self._since = None
+
+    def unit_due(self) -> float | None:
+        """Return when the text fed since the last unit is due in one (None: nothing fed)."""
+        if not (self._dirty or self._text):
+            return None
+        return self._last + COMPRESSED_FLUSH_INTERVAL
 
     def take_wait(self) -> float:
         """Return the longest flushed text waited for its unit to end, and reset it."""

@@ -125,13 +125,15 @@ class ServiceQueryable:
     """A queryable whose queries reach ``on_query`` from a dispatcher thread of its own.
 
     ``on_query`` must return quickly (hand the query to a worker) and finish every query it
-    takes, one way or another.
+    takes, one way or another. The thread is zenoh-python's own for an indirect callback:
+    it waits in the channel's ``recv`` without a timeout, so an idle queryable costs no CPU
+    (a thread of ours in ``Handler.recv`` woke ten times a second to check for signals).
+    Queries wait in a channel of 256 before Zenoh does.
 
     Args:
         session: the session.
         key: the key expression served.
         on_query: receives each query.
-        capacity: queries the channel holds before Zenoh waits.
 
     Raises:
         TransportError: Zenoh refused the declaration.
@@ -142,39 +144,29 @@ class ServiceQueryable:
         session: zenoh.Session,
         key: str,
         on_query: Callable[[IncomingQuery], None],
-        capacity: int = 256,
     ) -> None:
         self.key = key
-        with translate_zerror(f"queryable {key!r}"):
-            self._queryable = session.declare_queryable(key, zenoh.handlers.FifoChannel(capacity))
         self._on_query = on_query
-        self._thread = threading.Thread(
-            target=self._run,
-            args=(self._queryable.handler,),
-            name=f"fleetlog-queryable-{key.rsplit('/', 2)[-2]}",
-            daemon=True,
-        )
-        self._thread.start()
+        #: set when the dispatcher thread has ended (Zenoh drops the callback after its last call)
+        self._ended = threading.Event()
+        handler = zenoh.handlers.Callback(self._dispatch, self._ended.set, indirect=True)
+        with translate_zerror(f"queryable {key!r}"):
+            self._queryable = session.declare_queryable(key, handler)
 
-    def _run(self, handler: zenoh.handlers.Handler[zenoh.Query]) -> None:
-        while True:
-            try:
-                query = handler.recv()
-            except zenoh.ZError:
-                return  # undeclared: the channel is closed
-            incoming = IncomingQuery(query)
-            try:
-                self._on_query(incoming)
-            except Exception:  # the dispatcher must outlive any one query
-                _log.exception("handing over query %s failed", incoming.selector)
-                incoming.reply_err("internal error: the query could not be handled")
-                incoming.finish()
+    def _dispatch(self, query: zenoh.Query) -> None:
+        incoming = IncomingQuery(query)
+        try:
+            self._on_query(incoming)
+        except Exception:  # the dispatcher must outlive any one query
+            _log.exception("handing over query %s failed", incoming.selector)
+            incoming.reply_err("internal error: the query could not be handled")
+            incoming.finish()
 
     def undeclare(self, timeout: float = 2.0) -> None:
-        """Stop receiving queries and end the dispatcher thread."""
+        """Stop receiving queries; wait until the last one was handed over."""
         with contextlib.suppress(zenoh.ZError, RuntimeError):
             self._queryable.undeclare()
-        self._thread.join(timeout)
+        self._ended.wait(timeout)
 
 
 class LivelinessToken:

@@ -175,11 +175,11 @@ def test_the_watchdog_is_fed_from_the_drain_loop(tmp_path: Path) -> None:
     runner.start()
     try:
         assert service.ready.wait(20)
-        time.sleep(0.3)
+        time.sleep(2.5)  # idle: the loop sleeps, but wakes at least once a second
     finally:
         service.stop()
         runner.join(20)
-    assert len(kicks) >= 5
+    assert len(kicks) >= 3
     assert set(kicks) == {"drain-loop"}
 
 

@@ -216,7 +216,12 @@ def test_fsync_runs_in_the_background_at_its_interval(tmp_path: Path) -> None:
     assert rec.status()["synced_at"] == T0 + 0.6
     clock.t = T0 + 1.8
     rec.tick()
-    assert len(syncs()) == 1
+    assert syncs() == []  # nothing was written since: an idle session is not synced
+    rec.handle(MoosMessage("A", 2.0, clock.t, "iX", "", "alpha"))
+    rec.flush()
+    clock.t = T0 + 1.9
+    rec.tick()
+    assert len(syncs()) == 1  # overdue: the line written after an idle time is synced now
     rec.stop()
     for job in list(jobs):
         job()

@@ -1,0 +1,165 @@
+"""What an idle recorder costs: CPU-seconds per 10 s with nothing published, beside its baselines.
+
+In each round, at the same time and for the same window (after a warm-up):
+
+* ``fleetlog record`` (default configuration: wildcard logging, plain alog, fsync each second,
+  its own PLOGGER_STATUS every 2 s, which it logs);
+* a bare zenoh-python subscriber (one FIFO, blocked in ``recv``): what Zenoh itself costs
+  a process that waits for samples;
+* where ``MOOS_BIN`` names a folder holding ``MOOSDB`` and ``pLogger`` (core-moos, built by
+  hand): a real pLogger (AppTick 10, wildcard logging, its status posts logged) and its
+  MOOSDB, on a port of their own.
+
+CPU is read from ``/proc/PID/task/*/schedstat`` (nanoseconds on a CPU, every thread of the
+process) at the start and the end of the window. The figure is the median over the rounds,
+with the minimum and maximum, and the machine's load average beside it (the machine is
+shared)::
+
+    MOOS_BIN=/path/to/core-moos/build/bin python bench/recorder_idle.py --seconds 10 --rounds 3
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import os
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from benchlib import Helper, RecorderProcess, free_port, loadavg, spread
+
+_MISSION = """\
+ServerHost = localhost
+ServerPort = {port}
+Community  = bench
+
+ProcessConfig = pLogger
+{{
+  AppTick   = 10
+  CommsTick = 10
+  File      = idle
+  PATH      = {path}
+  SyncLog   = false
+  AsyncLog  = true
+  FileTimeStamp = true
+  WildCardLogging = true
+}}
+"""
+
+
+def cpu_ns(pid: int) -> int:
+    """Return the nanoseconds every thread of process ``pid`` has spent on a CPU."""
+    total = 0
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        with contextlib.suppress(OSError, ValueError, IndexError):  # a thread that ended
+            total += int((task / "schedstat").read_text().split()[0])
+    return total
+
+
+class PLogger:
+    """A real MOOSDB and pLogger, idle, in ``work``."""
+
+    def __init__(self, moos_bin: Path, work: Path) -> None:
+        port = free_port()
+        mission = work / "idle.moos"
+        mission.write_text(_MISSION.format(port=port, path=work / "plogs"))
+        self.procs: list[subprocess.Popen[bytes]] = []
+        self.db = self._spawn(moos_bin / "MOOSDB", str(mission), work / "moosdb.out")
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            with socket.socket() as s:
+                if s.connect_ex(("127.0.0.1", port)) == 0:
+                    break
+            time.sleep(0.05)
+        self.logger = self._spawn(moos_bin / "pLogger", str(mission), work / "plogger.out")
+
+    def _spawn(self, program: Path, mission: str, out: Path) -> subprocess.Popen[bytes]:
+        with out.open("wb") as f:
+            proc = subprocess.Popen(
+                [str(program), mission],
+                cwd=out.parent,
+                stdin=subprocess.DEVNULL,
+                stdout=f,
+                stderr=subprocess.STDOUT,
+            )
+        self.procs.append(proc)
+        return proc
+
+    def close(self) -> None:
+        for proc in reversed(self.procs):
+            proc.terminate()
+            try:
+                proc.wait(5)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
+
+
+def one_round(seconds: float, warmup: float, moos_bin: Path | None) -> dict[str, float]:
+    """Start everything, wait ``warmup``, measure CPU over ``seconds``: CPU-s per 10 s each."""
+    with tempfile.TemporaryDirectory(prefix="fleetlog-idle-") as tmp:
+        work = Path(tmp)
+        (work / "rec").mkdir()
+        rec = RecorderProcess(work / "rec", free_port())
+        bare = Helper("counter", ["--listen", f"tcp/127.0.0.1:{free_port()}", "-n", "1000000000"])
+        bare.read()
+        plogger = None
+        if moos_bin is not None:
+            (work / "moos").mkdir()
+            plogger = PLogger(moos_bin, work / "moos")
+        try:
+            time.sleep(warmup)
+            pids = {"fleetlog": rec.proc.pid, "bare": bare.proc.pid}
+            if plogger is not None:
+                pids["pLogger"] = plogger.logger.pid
+                pids["MOOSDB"] = plogger.db.pid
+            start = {name: cpu_ns(pid) for name, pid in pids.items()}
+            began = time.monotonic()
+            time.sleep(seconds)
+            end = {name: cpu_ns(pid) for name, pid in pids.items()}
+            scale = 10.0 / (time.monotonic() - began) / 1e9
+            return {name: (end[name] - start[name]) * scale for name in pids}
+        finally:
+            rec.stop()
+            bare.proc.kill()
+            bare.proc.wait()
+            if plogger is not None:
+                plogger.close()
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--seconds", type=float, default=10.0, help="measured window per round")
+    parser.add_argument("--warmup", type=float, default=3.0, help="seconds before the window")
+    parser.add_argument("--rounds", type=int, default=3)
+    args = parser.parse_args()
+    folder = os.environ.get("MOOS_BIN", "")
+    moos_bin = Path(folder) if folder and (Path(folder) / "pLogger").is_file() else None
+    if moos_bin is None:
+        print("MOOS_BIN unset (or no pLogger in it): no pLogger baseline", file=sys.stderr)
+    rounds = []
+    loads = []
+    for _ in range(args.rounds):
+        loads.append(float(loadavg()) if loadavg() != "?" else float("nan"))
+        rounds.append(one_round(args.seconds, args.warmup, moos_bin))
+    names = list(rounds[0])
+    load = spread(loads, "{:.1f}")
+    print(f"idle CPU-s per 10 s, {args.rounds} rounds of {args.seconds:g} s, load {load}")
+    for name in names:
+        print(f"  {name:<10} {spread([r[name] for r in rounds], '{:.4f}')}")
+    if moos_bin is not None:
+        both = [r["pLogger"] + r["MOOSDB"] for r in rounds]
+        print(f"  {'pLogger+DB':<10} {spread(both, '{:.4f}')}")
+        ratio = [r["fleetlog"] / max(r["pLogger"], 1e-9) for r in rounds]
+        print(f"fleetlog / pLogger alone: {spread(ratio, '{:.2f}')}x")
+    above = [r["fleetlog"] - r["bare"] for r in rounds]
+    print(f"fleetlog - bare subscriber: {spread(above, '{:.4f}')}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,357 @@
+"""The drain thread: samples from the subscribers' FIFOs into the engine, and nothing when idle.
+
+One thread drains the subscribers' FIFO channels (``try_recv``: no Python callback and no
+file I/O in Zenoh's threads, and a full FIFO makes Zenoh hold BLOCK publishers back instead
+of dropping), hands each sample to the :class:`~fleetlog.recorder.engine.Recorder`, and
+flushes plain logs as soon as the channels are empty, or within 5 ms of a line being written
+while they are not.
+
+When the channels stay empty the thread sleeps until there is work instead of polling: each
+FIFO's :class:`Inbox` then lends it to a watcher thread blocked in the FIFO's ``recv`` (no
+GIL held), which takes the next sample and wakes the drain thread; the drain thread also
+wakes for the engine's next timer (:meth:`Recorder.due_in`), a control command and stop.
+While a watcher waits, the drain thread never reads that FIFO, so samples keep their order.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import threading
+import time
+from collections.abc import Callable
+from typing import Any, Protocol
+
+from fleetlog.errors import TransportError
+from fleetlog.recorder.engine import Recorder
+from fleetlog.transport.bus import MissCounter, SampleDecoder
+from fleetlog.transport.session import translate_zerror
+
+__all__ = ["Drain", "Fifo", "Inbox", "Wake"]
+
+_FLUSH_DELAY = 0.005
+_TICK = 0.02
+#: inside a long drain batch, whether a flush is due is checked every this many samples
+#: (a power of two): at 6-10 µs per sample that is every 0.2-0.3 ms, and the check (0.11 µs)
+#: costs 0.003 µs per sample
+_CHECK_EVERY = 32
+#: the longest one subscriber's batch may hold the drain thread before the others get a
+#: turn: a flood of costly commands on one key must not hold back the variables on the rest
+_SLICE = 0.01
+#: empty passes (1 ms apart) before the drain thread sleeps until there is work: a steady
+#: stream keeps it polling, which batches samples per pass (one write per batch), and a
+#: handover to a watcher thread costs a few thread switches
+_SPIN = 4
+#: the longest the drain thread sleeps with nothing to do: the session directory's removal
+#: is noticed within it (and systemd's watchdog is fed at a third of WatchdogSec if less)
+_MAX_SLEEP = 1.0
+
+
+class Fifo(Protocol):
+    """What the drain uses of a FIFO subscriber (declared by the transport layer)."""
+
+    @property
+    def handler(self) -> Any:
+        """The channel itself (it still yields what it holds once undeclared)."""
+
+    def try_recv(self) -> Any:
+        """Return the next sample, or None when empty."""
+
+    def undeclare(self) -> None:
+        """Stop reception."""
+
+
+class Wake:
+    """A signal that wakes one sleeping thread, safe to give from a signal handler.
+
+    A lock held while nobody signalled: :meth:`set` releases it and :meth:`wait` takes it
+    back. A ``threading.Event`` would not do: its ``set`` takes a lock that the thread it
+    wakes may hold when a signal handler runs in that same thread (SIGINT stops the
+    recorder from the main thread, which drains), and would wait for itself.
+    """
+
+    __slots__ = ("_lock",)
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._lock.acquire()
+
+    def set(self) -> None:
+        """Wake the waiting thread, or the next to wait (any thread, a signal handler too)."""
+        with contextlib.suppress(RuntimeError):  # signalled already
+            self._lock.release()
+
+    def wait(self, timeout: float) -> bool:
+        """Wait until :meth:`set` or ``timeout`` seconds; return whether set (and clear it)."""
+        return self._lock.acquire(timeout=timeout)
+
+
+class Inbox:
+    """One subscriber's FIFO, with a watcher that waits for its next sample while the drain sleeps.
+
+    The watcher thread starts at the first :meth:`lend`. From ``lend`` until it has a sample
+    (:attr:`lent` true) the FIFO is the watcher's: the drain thread reads it again only
+    after taking :attr:`held`, the sample the watcher received, which comes first.
+    """
+
+    __slots__ = ("_armed", "_closing", "_thread", "_wake", "closed", "held", "lent", "sub")
+
+    def __init__(self, sub: Fifo, wake: Wake) -> None:
+        self.sub = sub
+        self._wake = wake
+        self._armed = threading.Event()
+        self._thread: threading.Thread | None = None
+        self._closing = False
+        #: the watcher may be inside ``recv``: the FIFO is not the drain thread's to read
+        self.lent = False
+        #: the sample the watcher received, not yet taken by the drain thread
+        self.held: Any = None
+        #: the channel was found closed (undeclared) by the watcher
+        self.closed = False
+
+    def lend(self) -> None:
+        """Let the watcher wait for the next sample (the drain thread is going to sleep)."""
+        if self.lent or self.closed or self.held is not None:
+            return
+        if self._thread is None:
+            self._thread = threading.Thread(target=self._watch, name="fleetlog-inbox", daemon=True)
+            self._thread.start()
+        self.lent = True
+        self._armed.set()
+
+    def _watch(self) -> None:
+        recv = self.sub.handler.recv
+        while True:
+            self._armed.wait()
+            self._armed.clear()
+            if self._closing:
+                return
+            try:
+                sample = recv()  # blocks without the GIL
+            except Exception:  # the channel is closed and empty: the subscriber is gone
+                sample = None
+                self.closed = True
+            # Held before the FIFO is given back: the drain thread reads ``lent`` first.
+            self.held = sample
+            self.lent = False
+            self._wake.set()
+            if self.closed:
+                return
+
+    def close(self, timeout: float = 2.0) -> None:
+        """Stop the watcher; call after the subscriber was undeclared (its ``recv`` then ends).
+
+        A sample it received in the meantime stays in :attr:`held`.
+        """
+        self._closing = True
+        self._armed.set()
+        if self._thread is not None:
+            self._thread.join(timeout)
+
+
+class Drain:
+    """Moves samples from the inboxes to the recorder, and its timers, in one thread."""
+
+    def __init__(
+        self,
+        recorder: Recorder,
+        var_prefix: str,
+        stop: threading.Event,
+        watchdog: Callable[[float], None] | None = None,
+        watchdog_every: float = _MAX_SLEEP,
+    ) -> None:
+        self.recorder = recorder
+        self._prefix = var_prefix
+        self._stop = stop
+        self._watchdog = watchdog
+        self._max_sleep = min(_MAX_SLEEP, watchdog_every) if watchdog else _MAX_SLEEP
+        #: set by whatever has work for a sleeping drain thread (a watcher, a command, stop)
+        self.wake = Wake()
+        self.inboxes: list[Inbox] = []
+        #: the sample-miss heartbeats' FIFO (read at each tick)
+        self.beats: Fifo | None = None
+        #: samples DROP publishers lost on the way (sample-miss detection, docs/wire.md)
+        self.misses = MissCounter()
+        #: when every subscriber was last seen empty (monotonic)
+        self._drained_at = 0.0
+        #: how many times the thread slept until there was work (tests, benchmarks)
+        self.sleeps = 0
+
+    def add(self, sub: Fifo) -> None:
+        """Drain one more subscriber (from any point of the drain thread's work)."""
+        self.inboxes.append(Inbox(sub, self.wake))
+
+    def _pump(
+        self,
+        inbox: Inbox,
+        recv: Callable[[], Any],
+        decoder: SampleDecoder,
+        deadline: float | None = None,
+    ) -> int:
+        """Log ``inbox``'s held sample and what ``recv`` yields until None; return how many.
+
+        Under a flood that never lets the channel empty, the deadline (monotonic, checked
+        every 256 samples) is what ends the pump.
+        """
+        recorder = self.recorder
+        count = 0
+        sample = inbox.held
+        inbox.held = None
+        if sample is None:
+            sample = recv()
+        while sample is not None:
+            if deadline is not None and not count & 255 and time.monotonic() > deadline:
+                inbox.held = sample
+                break
+            info = sample.source_info
+            if info is not None:
+                self.misses.seen(info, sample)
+            incoming = decoder.decode(sample)
+            if incoming is not None:
+                recorder.handle(incoming.message, garbled=incoming.garbled)
+            else:
+                recorder.unreadable(str(sample.key_expr))
+            count += 1
+            sample = recv()
+        return count
+
+    def finish(self, deadline: float) -> None:
+        """Log what is still queued (shutdown): until the FIFOs stay empty or the deadline."""
+        decoder = SampleDecoder(self._prefix)
+        self._read_beats()
+        while time.monotonic() < deadline:
+            got = 0
+            for inbox in self.inboxes:
+                if inbox.lent:
+                    continue  # empty when it was lent; its watcher hands over what comes
+                with translate_zerror("subscriber"):
+                    got += self._pump(inbox, inbox.sub.try_recv, decoder, deadline)
+            if not got:
+                self._drained_at = time.monotonic()
+                break
+        self._fold_misses(decoder, min_age=0.0)
+        self.recorder.flush()
+
+    def close(self) -> None:
+        """Stop reception, then log what the closed channels still hold, until each is closed.
+
+        A sample that reached the recorder is on disk: an undeclared subscriber's
+        ``try_recv`` fails, its handler still yields what was queued.
+        """
+        inboxes, self.inboxes = self.inboxes, []
+        handlers = [inbox.sub.handler for inbox in inboxes]
+        subs = [inbox.sub for inbox in inboxes]
+        if self.beats is not None:
+            subs.append(self.beats)
+            self.beats = None
+        for sub in subs:
+            with contextlib.suppress(TransportError), translate_zerror("undeclare"):
+                sub.undeclare()
+        decoder = SampleDecoder(self._prefix)
+        for inbox, handler in zip(inboxes, handlers, strict=True):
+            inbox.close()
+            # A closed, empty channel raises instead of returning None: that is its end.
+            with contextlib.suppress(TransportError), translate_zerror("subscriber"):
+                self._pump(inbox, handler.try_recv, decoder)
+        self._fold_misses(decoder, min_age=0.0)
+        self.recorder.flush()
+
+    def _read_beats(self) -> None:
+        """Hand the sample-miss heartbeats received so far to the miss counter."""
+        beats = self.beats
+        if beats is None:
+            return
+        with contextlib.suppress(TransportError), translate_zerror("heartbeats"):
+            beat = beats.try_recv()
+            while beat is not None:
+                self.misses.heartbeat(beat)
+                beat = beats.try_recv()
+
+    def _fold_misses(self, decoder: SampleDecoder, min_age: float | None = None) -> None:
+        """Count in the recorder what DROP publishers lost on the way (docs/wire.md)."""
+        misses = self.misses
+        misses.settle(self._drained_at, min_age)
+        for key, source, count in misses.take():
+            self.recorder.missed(decoder.name_of(key), source, count)
+
+    def _sleep(self) -> None:
+        """Sleep until a sample, a command, stop or the recorder's next timer."""
+        for inbox in self.inboxes:
+            inbox.lend()
+        timeout = min(self._max_sleep, max(0.001, self.recorder.due_in()))
+        self.sleeps += 1
+        self.wake.wait(timeout)
+
+    def run(self) -> None:
+        """Record until the stop event is set."""
+        recorder = self.recorder
+        decoder = SampleDecoder(self._prefix)
+        decode = decoder.decode
+        handle = recorder.handle
+        monotonic = time.monotonic
+        next_tick = 0.0
+        idle = 0
+        stop = self._stop
+        mask = _CHECK_EVERY - 1
+        seen = self.misses.seen
+        commands = recorder.commands
+        watchdog = self._watchdog
+        inboxes = self.inboxes
+        while not stop.is_set():
+            got = 0
+            for inbox in inboxes:
+                if inbox.lent:
+                    continue
+                try_recv = inbox.sub.try_recv
+                batch = 0
+                began = monotonic()
+                sample = inbox.held
+                if sample is None:
+                    sample = try_recv()
+                else:
+                    inbox.held = None
+                while sample is not None:
+                    # Numbered samples (DROP publishers) are checked for gaps: 0.05 µs for
+                    # the others (bench/miss_detection.py).
+                    info = sample.source_info
+                    if info is not None:
+                        seen(info, sample)
+                    incoming = decode(sample)
+                    if incoming is not None:
+                        handle(incoming.message, garbled=incoming.garbled)
+                    else:
+                        recorder.unreadable(str(sample.key_expr))
+                    batch += 1
+                    if not batch & mask:
+                        if recorder.flush_due(_FLUSH_DELAY):
+                            recorder.flush()
+                        if monotonic() - began > _SLICE:
+                            break
+                    if batch >= 8192:
+                        break
+                    sample = try_recv()
+                got += batch
+            now = monotonic()
+            if recorder.flush_due(0.0 if not got else _FLUSH_DELAY):
+                recorder.flush()
+            if commands.pending:
+                # One control command per pass, between batches (as a PLOGGER_CMD costs).
+                commands.run_queued()
+            if not got:
+                self._drained_at = now
+            if now >= next_tick or idle > _SPIN:
+                next_tick = now + _TICK
+                # Heartbeats read now are trusted once the FIFOs were seen empty after this.
+                self._read_beats()
+                self._fold_misses(decoder)
+                recorder.tick()
+                if watchdog is not None:
+                    watchdog(now)
+            if got or commands.pending:
+                idle = 0
+            else:
+                idle += 1
+                if idle <= _SPIN:
+                    # A line still reaches the OS within the bound.
+                    time.sleep(0.001)
+                elif not stop.is_set():
+                    self._sleep()

@@ -1,0 +1,194 @@
+"""The drain thread sleeps when idle, and loses, reorders or delays nothing for it.
+
+A real RecorderService on loopback Zenoh (a thread of this process), real files.
+"""
+
+from __future__ import annotations
+
+import json
+import signal
+import threading
+import time
+from collections.abc import Callable, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from alog_oracle import iter_entries
+from helpers import free_port
+from recorder_support import T0, config, rigs  # noqa: F401  (rigs: a fixture)
+
+from fleetlog.moos.mission import LoggerConfig
+from fleetlog.recorder.drain import Wake
+from fleetlog.recorder.service import RecorderService, ServiceOptions
+from fleetlog.transport.bus import MoosPublisher
+from fleetlog.transport.queries import start_query
+from fleetlog.transport.session import SessionOptions, open_session
+from fleetlog.wire.control import CONTROL
+from fleetlog.wire.keys import service_key, var_key
+from fleetlog.wire.message import MoosMessage
+
+ROOT = "fleet"
+VEHICLE = "drainer"
+
+
+def test_a_wake_given_before_the_wait_is_kept_once() -> None:
+    wake = Wake()
+    assert not wake.wait(0.0)
+    wake.set()
+    wake.set()  # coalesces
+    assert wake.wait(0.0)
+    assert not wake.wait(0.01)
+
+
+def test_a_signal_handler_in_the_sleeping_thread_wakes_it() -> None:
+    """SIGINT stops the CLI's recorder from the main thread, which is the one asleep."""
+    wake = Wake()
+    previous = signal.signal(signal.SIGALRM, lambda signum, frame: wake.set())
+    try:
+        signal.setitimer(signal.ITIMER_REAL, 0.05)
+        began = time.monotonic()
+        assert wake.wait(10.0)
+        assert time.monotonic() - began < 5.0
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+def test_the_engine_says_how_long_it_has_nothing_to_do(rigs: Callable[..., Any]) -> None:  # noqa: F811
+    rig = rigs()
+    rig.rec.start()
+    rig.rec.tick()
+    idle = rig.rec.due_in()
+    assert 0.0 < idle <= 2.0  # the next status post at the latest
+    rig.rec.handle(MoosMessage("A", 1.0, rig.clock.t, "iX", "", "alpha"))
+    assert rig.rec.due_in() == 0.0  # a line waits for its flush
+    rig.rec.flush()
+    assert rig.rec.due_in() > 0.0
+
+
+def test_a_compressed_unit_still_open_is_due_in_a_quarter_second(
+    rigs: Callable[..., Any],  # noqa: F811
+) -> None:
+    rig = rigs("File = R\nPath = logs\nLog = A @ 0\nCompressAlogs = zstd")
+    rig.rec.start()
+    rig.clock.t = T0 + 1.0
+    rig.rec.tick()  # the timers of the start (metadata) have run
+    rig.send("A", 1.0, at=1.0)
+    rig.rec.flush()  # the last unit ended long ago: this one ends at once
+    rig.send("A", 2.0, at=1.1)
+    rig.rec.flush()
+    session = rig.rec.session
+    assert session is not None
+    assert session.unit_due() == pytest.approx(T0 + 1.25, abs=1e-6)
+    assert rig.rec.due_in() == pytest.approx(0.15, abs=1e-6)
+    rig.clock.t = T0 + 1.25
+    rig.rec.tick()
+    assert session.unit_due() is None
+
+
+@pytest.fixture
+def service(tmp_path: Path) -> Iterator[Callable[[LoggerConfig], tuple[RecorderService, str]]]:
+    running: list[tuple[RecorderService, threading.Thread]] = []
+
+    def start(cfg: LoggerConfig) -> tuple[RecorderService, str]:
+        endpoint = f"tcp/127.0.0.1:{free_port()}"
+        options = ServiceOptions(
+            vehicle=VEHICLE,
+            root=ROOT,
+            zenoh=SessionOptions(listen=(endpoint,), multicast_scouting=False),
+            cwd=tmp_path,
+            freeze_gc=False,
+        )
+        svc = RecorderService(cfg, options)
+        thread = threading.Thread(target=svc.run, name="recorder", daemon=True)
+        thread.start()
+        assert svc.ready.wait(30), "the recorder did not start"
+        running.append((svc, thread))
+        return svc, endpoint
+
+    yield start
+    for svc, thread in running:
+        svc.stop()
+        thread.join(30)
+
+
+def logged(tmp_path: Path) -> list[tuple[str, float]]:
+    alogs = list(tmp_path.glob("*/*.alog"))
+    assert len(alogs) == 1, alogs
+    with alogs[0].open() as f:
+        return [(e.key, float(e.value)) for e in iter_entries(f) if e.key in ("X", "Y")]  # type: ignore[arg-type]
+
+
+def wait_sleeping(svc: RecorderService, more_than: int, timeout: float = 10.0) -> bool:
+    drain = svc._drain
+    assert drain is not None
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        if drain.sleeps > more_than:
+            return True
+        time.sleep(0.005)
+    return False
+
+
+@pytest.mark.parametrize(
+    "body",
+    [
+        "Log = X @ 0\nLog = Y @ 0\nWildcardLogging = false",  # a FIFO per variable
+        "WildcardLogging = true",  # one FIFO for every variable
+    ],
+    ids=["fifo-per-variable", "one-fifo"],
+)
+def test_bursts_after_idle_times_are_logged_whole_and_in_order(
+    service: Callable[[LoggerConfig], tuple[RecorderService, str]], tmp_path: Path, body: str
+) -> None:
+    svc, endpoint = service(config(f"File = R\nPath = .\n{body}"))
+    session = open_session(SessionOptions(connect=(endpoint,), multicast_scouting=False))
+    try:
+        pub = MoosPublisher(session, ROOT, VEHICLE, "iTest")
+        for name in ("X", "Y"):
+            probe = session.declare_publisher(var_key(ROOT, VEHICLE, name))
+            deadline = time.monotonic() + 10
+            while not probe.matching_status.matching and time.monotonic() < deadline:
+                time.sleep(0.01)
+            probe.undeclare()
+        sent: list[tuple[str, float]] = []
+        for burst in range(8):
+            drain = svc._drain
+            assert drain is not None
+            assert wait_sleeping(svc, drain.sleeps), "the drain thread never went to sleep"
+            for i in range(40):
+                name = "XY"[i % 2]
+                value = float(burst * 40 + i)
+                pub.publish(name, value)
+                sent.append((name, value))
+        # Every sample reaches the file soon after it was published, without a stop.
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline and len(logged(tmp_path)) < len(sent):
+            time.sleep(0.02)
+        got = logged(tmp_path)
+        for name in ("X", "Y"):
+            assert [v for n, v in got if n == name] == [v for n, v in sent if n == name]
+    finally:
+        session.close()
+
+
+def test_a_control_command_wakes_a_sleeping_recorder(
+    service: Callable[[LoggerConfig], tuple[RecorderService, str]],
+) -> None:
+    svc, endpoint = service(config("File = R\nPath = .\nWildcardLogging = true"))
+    session = open_session(SessionOptions(connect=(endpoint,), multicast_scouting=False))
+    try:
+        request = {"cmd": "note", "key": "site", "value": "bay", "source": "ops"}
+        payload = json.dumps(request).encode()
+        selector = service_key(ROOT, VEHICLE, CONTROL)
+        for _ in range(50):
+            assert wait_sleeping(svc, 0)
+            replies = list(start_query(session, selector, timeout=10.0, payload=payload))
+            if replies:
+                break
+            time.sleep(0.1)  # the queryable is not known to this session yet
+        (reply,) = replies
+        assert json.loads(reply.payload)["ok"] is True
+    finally:
+        session.close()
