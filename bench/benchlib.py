@@ -15,6 +15,7 @@ multicast scouting off and explicit loopback endpoints (STYLE.md §5).
 from __future__ import annotations
 
 import argparse
+import contextlib
 import json
 import os
 import re
@@ -212,6 +213,88 @@ class RecorderProcess:
         text = "".join(self.stderr)
         summary = [line for line in text.splitlines() if "stopped:" in line]
         return summary[-1] if summary else text.strip()[-300:]
+
+
+_MISSION = """\
+ServerHost = localhost
+ServerPort = {port}
+Community  = bench
+
+ProcessConfig = pLogger
+{{
+  AppTick   = {tick}
+  CommsTick = {tick}
+  File      = plogger
+  PATH      = {path}
+  SyncLog   = false
+  AsyncLog  = true
+  FileTimeStamp = true
+  WildCardLogging = true
+}}
+"""
+
+
+def cpu_ns(pid: int) -> int:
+    """Return the nanoseconds every thread of process ``pid`` has spent on a CPU."""
+    total = 0
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        with contextlib.suppress(OSError, ValueError, IndexError):  # a thread that ended
+            total += int((task / "schedstat").read_text().split()[0])
+    return total
+
+
+class PLogger:
+    """A real MOOSDB and pLogger (core-moos, ``MOOS_BIN``) in ``work``, on a port of their own.
+
+    pLogger logs every variable (WildCardLogging) into ``work/plogs``.
+    """
+
+    def __init__(self, moos_bin: Path, work: Path, app_tick: int = 10) -> None:
+        self.port = port = free_port()
+        self.logs = work / "plogs"
+        self.logs.mkdir()  # pLogger creates no parents
+        mission = work / "plogger.moos"
+        mission.write_text(_MISSION.format(port=port, path=self.logs, tick=app_tick))
+        self.procs: list[subprocess.Popen[bytes]] = []
+        self.db = self._spawn(moos_bin / "MOOSDB", str(mission), work / "moosdb.out")
+        deadline = time.monotonic() + 10
+        while time.monotonic() < deadline:
+            with socket.socket() as s:
+                if s.connect_ex(("127.0.0.1", port)) == 0:
+                    break
+            time.sleep(0.05)
+        self.logger = self._spawn(moos_bin / "pLogger", str(mission), work / "plogger.out")
+
+    def alog(self, timeout: float = 20.0) -> Path:
+        """Return pLogger's alog, once it exists."""
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            found = sorted(self.logs.glob("*/*.alog"))
+            if found:
+                return found[-1]
+            time.sleep(0.1)
+        raise TimeoutError("pLogger wrote no alog")
+
+    def _spawn(self, program: Path, mission: str, out: Path) -> subprocess.Popen[bytes]:
+        with out.open("wb") as f:
+            proc = subprocess.Popen(
+                [str(program), mission],
+                cwd=out.parent,
+                stdin=subprocess.DEVNULL,
+                stdout=f,
+                stderr=subprocess.STDOUT,
+            )
+        self.procs.append(proc)
+        return proc
+
+    def close(self) -> None:
+        for proc in reversed(self.procs):
+            proc.terminate()
+            try:
+                proc.wait(5)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
 
 
 def summary_counts(summary: str) -> dict[str, int]:

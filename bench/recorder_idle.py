@@ -21,82 +21,13 @@ shared)::
 from __future__ import annotations
 
 import argparse
-import contextlib
 import os
-import socket
-import subprocess
 import sys
 import tempfile
 import time
 from pathlib import Path
 
-from benchlib import Helper, RecorderProcess, free_port, loadavg, spread
-
-_MISSION = """\
-ServerHost = localhost
-ServerPort = {port}
-Community  = bench
-
-ProcessConfig = pLogger
-{{
-  AppTick   = 10
-  CommsTick = 10
-  File      = idle
-  PATH      = {path}
-  SyncLog   = false
-  AsyncLog  = true
-  FileTimeStamp = true
-  WildCardLogging = true
-}}
-"""
-
-
-def cpu_ns(pid: int) -> int:
-    """Return the nanoseconds every thread of process ``pid`` has spent on a CPU."""
-    total = 0
-    for task in Path(f"/proc/{pid}/task").iterdir():
-        with contextlib.suppress(OSError, ValueError, IndexError):  # a thread that ended
-            total += int((task / "schedstat").read_text().split()[0])
-    return total
-
-
-class PLogger:
-    """A real MOOSDB and pLogger, idle, in ``work``."""
-
-    def __init__(self, moos_bin: Path, work: Path) -> None:
-        port = free_port()
-        mission = work / "idle.moos"
-        mission.write_text(_MISSION.format(port=port, path=work / "plogs"))
-        self.procs: list[subprocess.Popen[bytes]] = []
-        self.db = self._spawn(moos_bin / "MOOSDB", str(mission), work / "moosdb.out")
-        deadline = time.monotonic() + 10
-        while time.monotonic() < deadline:
-            with socket.socket() as s:
-                if s.connect_ex(("127.0.0.1", port)) == 0:
-                    break
-            time.sleep(0.05)
-        self.logger = self._spawn(moos_bin / "pLogger", str(mission), work / "plogger.out")
-
-    def _spawn(self, program: Path, mission: str, out: Path) -> subprocess.Popen[bytes]:
-        with out.open("wb") as f:
-            proc = subprocess.Popen(
-                [str(program), mission],
-                cwd=out.parent,
-                stdin=subprocess.DEVNULL,
-                stdout=f,
-                stderr=subprocess.STDOUT,
-            )
-        self.procs.append(proc)
-        return proc
-
-    def close(self) -> None:
-        for proc in reversed(self.procs):
-            proc.terminate()
-            try:
-                proc.wait(5)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+from benchlib import Helper, PLogger, RecorderProcess, cpu_ns, free_port, loadavg, spread
 
 
 def one_round(seconds: float, warmup: float, moos_bin: Path | None) -> dict[str, float]:
@@ -110,7 +41,7 @@ def one_round(seconds: float, warmup: float, moos_bin: Path | None) -> dict[str,
         plogger = None
         if moos_bin is not None:
             (work / "moos").mkdir()
-            plogger = PLogger(moos_bin, work / "moos")
+            plogger = PLogger(moos_bin, work / "moos", app_tick=10)
         try:
             time.sleep(warmup)
             pids = {"fleetlog": rec.proc.pid, "bare": bare.proc.pid}

@@ -16,9 +16,12 @@ While a watcher waits, the drain thread never reads that FIFO, so samples keep t
 from __future__ import annotations
 
 import contextlib
+import os
+import select
+import signal
 import threading
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from typing import Any, Protocol
 
 from fleetlog.errors import TransportError
@@ -61,28 +64,57 @@ class Fifo(Protocol):
 
 
 class Wake:
-    """A signal that wakes one sleeping thread, safe to give from a signal handler.
+    """Wakes one sleeping thread: a non-blocking pipe, safe to write from a signal handler.
 
-    A lock held while nobody signalled: :meth:`set` releases it and :meth:`wait` takes it
-    back. A ``threading.Event`` would not do: its ``set`` takes a lock that the thread it
-    wakes may hold when a signal handler runs in that same thread (SIGINT stops the
-    recorder from the main thread, which drains), and would wait for itself.
+    ``threading.Event`` would not do: its ``set`` takes a lock that the sleeping thread may
+    hold when a signal handler runs in that same thread (SIGINT stops the CLI's recorder,
+    whose main thread drains). And Linux may deliver a signal to any thread, while Python
+    runs its handler in the main thread only once that thread wakes: :meth:`signals` makes
+    the C-level handler write to this pipe too (``signal.set_wakeup_fd``), so the sleeping
+    main thread wakes at once to run it.
     """
 
-    __slots__ = ("_lock",)
+    __slots__ = ("_closed", "_read", "_write")
 
     def __init__(self) -> None:
-        self._lock = threading.Lock()
-        self._lock.acquire()
+        self._read, self._write = os.pipe2(os.O_NONBLOCK | os.O_CLOEXEC)
+        self._closed = False
 
     def set(self) -> None:
         """Wake the waiting thread, or the next to wait (any thread, a signal handler too)."""
-        with contextlib.suppress(RuntimeError):  # signalled already
-            self._lock.release()
+        if self._closed:
+            return
+        with contextlib.suppress(BlockingIOError):  # full: woken already
+            os.write(self._write, b"w")
 
     def wait(self, timeout: float) -> bool:
-        """Wait until :meth:`set` or ``timeout`` seconds; return whether set (and clear it)."""
-        return self._lock.acquire(timeout=timeout)
+        """Wait for :meth:`set` (or a signal) at most ``timeout`` s; return whether woken."""
+        ready, _, _ = select.select([self._read], [], [], timeout)
+        if not ready:
+            return False
+        with contextlib.suppress(BlockingIOError):
+            while os.read(self._read, 4096):
+                pass
+        return True
+
+    @contextlib.contextmanager
+    def signals(self) -> Iterator[None]:
+        """Wake on any signal while in this block (main thread only; elsewhere nothing)."""
+        if threading.current_thread() is not threading.main_thread():
+            yield
+            return
+        previous = signal.set_wakeup_fd(self._write, warn_on_full_buffer=False)
+        try:
+            yield
+        finally:
+            signal.set_wakeup_fd(previous)
+
+    def close(self) -> None:
+        """Close the pipe (later calls to :meth:`set` do nothing)."""
+        self._closed = True
+        for fd in (self._read, self._write):
+            with contextlib.suppress(OSError):
+                os.close(fd)
 
 
 class Inbox:
@@ -254,6 +286,7 @@ class Drain:
                 self._pump(inbox, handler.try_recv, decoder)
         self._fold_misses(decoder, min_age=0.0)
         self.recorder.flush()
+        self.wake.close()
 
     def _read_beats(self) -> None:
         """Hand the sample-miss heartbeats received so far to the miss counter."""
@@ -283,6 +316,10 @@ class Drain:
 
     def run(self) -> None:
         """Record until the stop event is set."""
+        with self.wake.signals():
+            self._run()
+
+    def _run(self) -> None:
         recorder = self.recorder
         decoder = SampleDecoder(self._prefix)
         decode = decoder.decode

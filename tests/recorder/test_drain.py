@@ -55,6 +55,31 @@ def test_a_signal_handler_in_the_sleeping_thread_wakes_it() -> None:
         signal.signal(signal.SIGALRM, previous)
 
 
+def test_a_signal_another_thread_receives_wakes_the_main_thread() -> None:
+    """Linux gives a process's signal to any thread; Python runs the handler in the main one."""
+    wake = Wake()
+    handled: list[int] = []
+    previous = signal.signal(signal.SIGUSR1, lambda signum, frame: handled.append(signum))
+    try:
+        with wake.signals():
+            other = threading.Thread(
+                target=lambda: (
+                    time.sleep(0.05),
+                    signal.pthread_kill(threading.get_ident(), signal.SIGUSR1),
+                )
+            )
+            other.start()
+            began = time.monotonic()
+            assert wake.wait(10.0)
+            assert time.monotonic() - began < 5.0
+            other.join()
+    finally:
+        signal.signal(signal.SIGUSR1, previous)
+        wake.close()
+    time.sleep(0.01)  # the handler runs at the main thread's next bytecode
+    assert handled == [signal.SIGUSR1]
+
+
 def test_the_engine_says_how_long_it_has_nothing_to_do(rigs: Callable[..., Any]) -> None:  # noqa: F811
     rig = rigs()
     rig.rec.start()

@@ -1,0 +1,164 @@
+"""CPU per message: the recorder against a real pLogger and its MOOSDB, for the same traffic.
+
+In each round, one after the other:
+
+* ``fleetlog record`` (default configuration) while a publisher process (fleetlog's
+  ``MoosPublisher``, BLOCK) puts N doubles on one variable, as fast as it can (``--rate 0``)
+  or at ``--rate`` messages/s; the figure is the recorder process's CPU (every thread:
+  Zenoh's receive threads included, idle cost included) from the first put until the last
+  line is in its alog;
+* where ``MOOS_BIN`` names a folder holding ``MOOSDB`` and ``pLogger`` (core-moos, built by
+  hand): the same N doubles posted into a MOOSDB by fleetlog's asyncio MOOS client (as fast as
+  it can) and logged by a real pLogger (AppTick ``--plogger-tick``, 50 by default: its
+  loss-free best); the figures are pLogger's CPU and the MOOSDB's, which does the routing
+  that Zenoh does inside fleetlog's process, until pLogger's alog holds every line.
+
+CPU is read from ``/proc/PID/task/*/schedstat``. Each figure is CPU-seconds per 100,000
+messages: median [min–max] over the rounds, with the load average beside it::
+
+    MOOS_BIN=/path/to/core-moos/build/bin python bench/recorder_cpu.py -n 100000 --rounds 3
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from benchlib import (
+    END,
+    Helper,
+    PLogger,
+    RecorderProcess,
+    Tail,
+    cpu_ns,
+    free_port,
+    loadavg,
+    spread,
+)
+
+BRIDGE = Path(__file__).resolve().with_name("bridge.py")
+
+
+def wait_lines(alog: Path, name: bytes, n: int, timeout: float = 300.0) -> int:
+    """Wait until ``alog`` holds ``n`` lines of ``name`` (or it stops growing for 5 s)."""
+    deadline = time.monotonic() + timeout
+    while not alog.exists() and time.monotonic() < deadline:
+        time.sleep(0.05)
+    tail = Tail(alog)
+    count = 0
+    quiet_since = time.monotonic()
+    try:
+        while count < n and time.monotonic() < deadline:
+            lines = tail.read_lines()
+            if lines:
+                quiet_since = time.monotonic()
+                count += sum(1 for line in lines if line.split(None, 2)[1:2] == [name])
+            elif time.monotonic() - quiet_since > 5.0:
+                break
+            else:
+                time.sleep(0.01)
+    finally:
+        tail.close()
+    return count
+
+
+def fleetlog_round(n: int, rate: float, work: Path) -> dict[str, float]:
+    port = free_port()
+    rec = RecorderProcess(work, port)
+    pub = Helper(
+        "publisher",
+        ["--connect", f"tcp/127.0.0.1:{port}", "-n", str(n), "--keys", "1", "--rate", str(rate)],
+    )
+    try:
+        pub.read()  # ready: its publishers match the recorder's subscription
+        time.sleep(0.5)
+        before = cpu_ns(rec.proc.pid)
+        began = time.monotonic()
+        pub.send("go")
+        got = wait_lines(rec.alog, END.encode(), 1)
+        used = cpu_ns(rec.proc.pid) - before
+        wall = time.monotonic() - began
+        pub.read()
+    finally:
+        pub.finish()
+        summary = rec.stop()
+    if not got:
+        raise RuntimeError(f"the recorder did not log {END}: {summary}")
+    return {"fleetlog": used / 1e9 * 1e5 / n, "fleetlog_wall": wall, "summary_lost": 0.0}
+
+
+def plogger_round(n: int, moos_bin: Path, tick: int, work: Path) -> dict[str, float]:
+    moos = PLogger(moos_bin, work, app_tick=tick)
+    try:
+        alog = moos.alog()
+        time.sleep(0.5)
+        pub = Helper(
+            "moospub",
+            ["--port", str(moos.port), "-n", str(n), "--name", "tx", "--var", "BENCH_X"],
+            BRIDGE,
+        )
+        pub.read()
+        time.sleep(0.5)
+        before = (cpu_ns(moos.logger.pid), cpu_ns(moos.db.pid))
+        pub.send("go")
+        got = wait_lines(alog, b"BENCH_X", n)
+        used = (cpu_ns(moos.logger.pid) - before[0], cpu_ns(moos.db.pid) - before[1])
+        pub.read()
+        pub.finish()
+    finally:
+        moos.close()
+    per = 1e5 / n / 1e9
+    return {"pLogger": used[0] * per, "MOOSDB": used[1] * per, "pLogger_logged": float(got)}
+
+
+def main() -> int:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("-n", type=int, default=100_000, help="messages per round")
+    parser.add_argument("--rate", type=float, default=0.0, help="fleetlog's msg/s; 0: a burst")
+    parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--plogger-tick", type=int, default=50, help="pLogger's AppTick")
+    args = parser.parse_args()
+    folder = os.environ.get("MOOS_BIN", "")
+    moos_bin = Path(folder) if folder and (Path(folder) / "pLogger").is_file() else None
+    if moos_bin is None:
+        print("MOOS_BIN unset (or no pLogger in it): no pLogger baseline", file=sys.stderr)
+    rounds: list[dict[str, float]] = []
+    loads: list[float] = []
+    for _ in range(args.rounds):
+        loads.append(os.getloadavg()[0])
+        with tempfile.TemporaryDirectory(prefix="fleetlog-cpu-") as tmp:
+            row = fleetlog_round(args.n, args.rate, Path(tmp))
+        if moos_bin is not None:
+            with tempfile.TemporaryDirectory(prefix="fleetlog-cpu-moos-") as tmp:
+                row.update(plogger_round(args.n, moos_bin, args.plogger_tick, Path(tmp)))
+        rounds.append(row)
+
+    def col(name: str) -> list[float]:
+        return [r[name] for r in rounds]
+
+    rate = f"{args.rate:,.0f} msg/s" if args.rate > 0 else "a burst"
+    print(
+        f"CPU-s per 100k doubles, {args.rounds} rounds of {args.n:,} ({rate} into fleetlog), "
+        f"load {spread(loads, '{:.1f}')} (load at {loadavg()} now)"
+    )
+    print(f"  fleetlog record     {spread(col('fleetlog'), '{:.3f}')}")
+    if moos_bin is not None:
+        both = [r["pLogger"] + r["MOOSDB"] for r in rounds]
+        print(f"  pLogger             {spread(col('pLogger'), '{:.3f}')}")
+        print(f"  MOOSDB              {spread(col('MOOSDB'), '{:.3f}')}")
+        print(f"  pLogger + MOOSDB    {spread(both, '{:.3f}')}")
+        logged = spread(col("pLogger_logged"), "{:,.0f}")
+        print(f"  (pLogger logged {logged} of {args.n:,}; a burst into the MOOSDB)")
+        ratio_both = [r["fleetlog"] / (r["pLogger"] + r["MOOSDB"]) for r in rounds]
+        ratio_alone = [r["fleetlog"] / r["pLogger"] for r in rounds]
+        print(f"fleetlog / (pLogger + MOOSDB): {spread(ratio_both, '{:.2f}')}x")
+        print(f"fleetlog / pLogger alone:      {spread(ratio_alone, '{:.2f}')}x")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
