@@ -230,6 +230,7 @@ ProcessConfig = pLogger
   AsyncLog  = true
   FileTimeStamp = true
   WildCardLogging = true
+  Log = BENCH_X @ 0
 }}
 """
 
@@ -246,7 +247,9 @@ def cpu_ns(pid: int) -> int:
 class PLogger:
     """A real MOOSDB and pLogger (core-moos, ``MOOS_BIN``) in ``work``, on a port of their own.
 
-    pLogger logs every variable (WildCardLogging) into ``work/plogs``.
+    pLogger logs every variable (WildCardLogging) into ``work/plogs``; BENCH_X is named
+    (``Log``) so that it is registered from the start (a wildcard registers a variable only
+    once the MOOSDB's DB_VARSUMMARY shows it).
     """
 
     def __init__(self, moos_bin: Path, work: Path, app_tick: int = 10) -> None:

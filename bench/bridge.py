@@ -74,12 +74,19 @@ def role_moospub(args: argparse.Namespace) -> None:
         _emit(event="ready")
         await asyncio.to_thread(_wait_for, sys.stdin, "go")
         first = time.time()
-        for start in range(0, args.n, 1000):
+        # --rate: chunks of a hundredth of a second's messages, each sent on its schedule
+        step = max(1, int(args.rate / 100)) if args.rate > 0 else 1000
+        began = time.perf_counter()
+        for start in range(0, args.n, step):
+            if args.rate > 0:
+                delay = began + start / args.rate - time.perf_counter()
+                if delay > 0:
+                    await asyncio.sleep(delay)
             now = time.time()
             client.send(
                 [
                     notify(args.var, float(i), now, args.name)
-                    for i in range(start, min(start + 1000, args.n))
+                    for i in range(start, min(start + step, args.n))
                 ]
             )
             await asyncio.sleep(0)
@@ -529,6 +536,7 @@ if __name__ == "__main__":
         p.add_argument("-n", type=int, default=0)
         p.add_argument("--name", default="tx")
         p.add_argument("--var", default="BENCH_X")
+        p.add_argument("--rate", type=float, default=0.0, help="msg/s; 0: as fast as it can")
         ns = p.parse_args(sys.argv[2:])
         roles = {"moospub": role_moospub, "moosrx": role_moosrx, "zcount": role_zcount}
         roles["zstamps"] = role_zstamps

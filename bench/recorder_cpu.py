@@ -8,10 +8,12 @@ In each round, one after the other:
   Zenoh's receive threads included, idle cost included) from the first put until the last
   line is in its alog;
 * where ``MOOS_BIN`` names a folder holding ``MOOSDB`` and ``pLogger`` (core-moos, built by
-  hand): the same N doubles posted into a MOOSDB by fleetlog's asyncio MOOS client (as fast as
-  it can) and logged by a real pLogger (AppTick ``--plogger-tick``, 50 by default: its
-  loss-free best); the figures are pLogger's CPU and the MOOSDB's, which does the routing
-  that Zenoh does inside fleetlog's process, until pLogger's alog holds every line.
+  hand): the same N doubles posted into a MOOSDB by fleetlog's asyncio MOOS client (as fast
+  as it can, or at ``--rate``) and logged by a real pLogger (AppTick ``--plogger-tick``, 50
+  by default: its loss-free best); the figures are pLogger's CPU and the MOOSDB's, which does
+  the routing that Zenoh does inside fleetlog's process, until pLogger's alog holds every
+  line or no more come for 5 s (how many it logged is printed: pLogger drops what its
+  queues cannot hold, and what it drops costs it nothing).
 
 CPU is read from ``/proc/PID/task/*/schedstat``. Each figure is CPU-seconds per 100,000
 messages: median [min–max] over the rounds, with the load average beside it::
@@ -43,8 +45,14 @@ from benchlib import (
 BRIDGE = Path(__file__).resolve().with_name("bridge.py")
 
 
-def wait_lines(alog: Path, name: bytes, n: int, timeout: float = 300.0) -> int:
-    """Wait until ``alog`` holds ``n`` lines of ``name`` (or it stops growing for 5 s)."""
+def wait_lines(
+    alog: Path, name: bytes, n: int, progress: bytes | None = None, timeout: float = 300.0
+) -> int:
+    """Wait until ``alog`` holds ``n`` lines of ``name`` (or no line of ``progress`` comes for 5 s).
+
+    ``progress`` is ``name`` by default.
+    """
+    progress = name if progress is None else progress
     deadline = time.monotonic() + timeout
     while not alog.exists() and time.monotonic() < deadline:
         time.sleep(0.05)
@@ -54,9 +62,10 @@ def wait_lines(alog: Path, name: bytes, n: int, timeout: float = 300.0) -> int:
     try:
         while count < n and time.monotonic() < deadline:
             lines = tail.read_lines()
-            if lines:
+            names = [line.split(None, 2)[1:2] for line in lines]
+            count += names.count([name])
+            if [progress] in names:
                 quiet_since = time.monotonic()
-                count += sum(1 for line in lines if line.split(None, 2)[1:2] == [name])
             elif time.monotonic() - quiet_since > 5.0:
                 break
             else:
@@ -79,7 +88,7 @@ def fleetlog_round(n: int, rate: float, work: Path) -> dict[str, float]:
         before = cpu_ns(rec.proc.pid)
         began = time.monotonic()
         pub.send("go")
-        got = wait_lines(rec.alog, END.encode(), 1)
+        got = wait_lines(rec.alog, END.encode(), 1, progress=b"BENCH_X0")
         used = cpu_ns(rec.proc.pid) - before
         wall = time.monotonic() - began
         pub.read()
@@ -91,14 +100,14 @@ def fleetlog_round(n: int, rate: float, work: Path) -> dict[str, float]:
     return {"fleetlog": used / 1e9 * 1e5 / n, "fleetlog_wall": wall, "summary_lost": 0.0}
 
 
-def plogger_round(n: int, moos_bin: Path, tick: int, work: Path) -> dict[str, float]:
+def plogger_round(n: int, rate: float, moos_bin: Path, tick: int, work: Path) -> dict[str, float]:
     moos = PLogger(moos_bin, work, app_tick=tick)
     try:
         alog = moos.alog()
         time.sleep(0.5)
         pub = Helper(
             "moospub",
-            ["--port", str(moos.port), "-n", str(n), "--name", "tx", "--var", "BENCH_X"],
+            ["--port", str(moos.port), "-n", str(n), "--var", "BENCH_X", "--rate", str(rate)],
             BRIDGE,
         )
         pub.read()
@@ -118,7 +127,7 @@ def plogger_round(n: int, moos_bin: Path, tick: int, work: Path) -> dict[str, fl
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("-n", type=int, default=100_000, help="messages per round")
-    parser.add_argument("--rate", type=float, default=0.0, help="fleetlog's msg/s; 0: a burst")
+    parser.add_argument("--rate", type=float, default=0.0, help="msg/s; 0: a burst")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--plogger-tick", type=int, default=50, help="pLogger's AppTick")
     args = parser.parse_args()
@@ -134,15 +143,16 @@ def main() -> int:
             row = fleetlog_round(args.n, args.rate, Path(tmp))
         if moos_bin is not None:
             with tempfile.TemporaryDirectory(prefix="fleetlog-cpu-moos-") as tmp:
-                row.update(plogger_round(args.n, moos_bin, args.plogger_tick, Path(tmp)))
+                row.update(plogger_round(args.n, args.rate, moos_bin, args.plogger_tick, Path(tmp)))
         rounds.append(row)
+        print("round:", {k: round(v, 4) for k, v in row.items()}, file=sys.stderr, flush=True)
 
     def col(name: str) -> list[float]:
         return [r[name] for r in rounds]
 
-    rate = f"{args.rate:,.0f} msg/s" if args.rate > 0 else "a burst"
+    rate = f"{args.rate:,.0f} msg/s" if args.rate > 0 else "bursts"
     print(
-        f"CPU-s per 100k doubles, {args.rounds} rounds of {args.n:,} ({rate} into fleetlog), "
+        f"CPU-s per 100k doubles, {args.rounds} rounds of {args.n:,} ({rate}), "
         f"load {spread(loads, '{:.1f}')} (load at {loadavg()} now)"
     )
     print(f"  fleetlog record     {spread(col('fleetlog'), '{:.3f}')}")
@@ -152,7 +162,7 @@ def main() -> int:
         print(f"  MOOSDB              {spread(col('MOOSDB'), '{:.3f}')}")
         print(f"  pLogger + MOOSDB    {spread(both, '{:.3f}')}")
         logged = spread(col("pLogger_logged"), "{:,.0f}")
-        print(f"  (pLogger logged {logged} of {args.n:,}; a burst into the MOOSDB)")
+        print(f"  (pLogger logged {logged} of {args.n:,})")
         ratio_both = [r["fleetlog"] / (r["pLogger"] + r["MOOSDB"]) for r in rounds]
         ratio_alone = [r["fleetlog"] / r["pLogger"] for r in rounds]
         print(f"fleetlog / (pLogger + MOOSDB): {spread(ratio_both, '{:.2f}')}x")

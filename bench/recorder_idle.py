@@ -2,6 +2,7 @@
 
 In each round, at the same time and for the same window (after a warm-up):
 
+* with ``--also TREE``, the same from another source tree (``PYTHONPATH=TREE``: before/after);
 * ``fleetlog record`` (default configuration: wildcard logging, plain alog, fsync each second,
   its own PLOGGER_STATUS every 2 s, which it logs);
 * a bare zenoh-python subscriber (one FIFO, blocked in ``recv``): what Zenoh itself costs
@@ -30,12 +31,27 @@ from pathlib import Path
 from benchlib import Helper, PLogger, RecorderProcess, cpu_ns, free_port, loadavg, spread
 
 
-def one_round(seconds: float, warmup: float, moos_bin: Path | None) -> dict[str, float]:
+def one_round(
+    seconds: float, warmup: float, moos_bin: Path | None, also: Path | None
+) -> dict[str, float]:
     """Start everything, wait ``warmup``, measure CPU over ``seconds``: CPU-s per 10 s each."""
     with tempfile.TemporaryDirectory(prefix="fleetlog-idle-") as tmp:
         work = Path(tmp)
         (work / "rec").mkdir()
         rec = RecorderProcess(work / "rec", free_port())
+        other = None
+        if also is not None:
+            # The same command from another source tree (a before/after pair in one run).
+            (work / "also").mkdir()
+            saved = os.environ.get("PYTHONPATH")
+            os.environ["PYTHONPATH"] = str(also)
+            try:
+                other = RecorderProcess(work / "also", free_port())
+            finally:
+                if saved is None:
+                    del os.environ["PYTHONPATH"]
+                else:
+                    os.environ["PYTHONPATH"] = saved
         bare = Helper("counter", ["--listen", f"tcp/127.0.0.1:{free_port()}", "-n", "1000000000"])
         bare.read()
         plogger = None
@@ -45,6 +61,8 @@ def one_round(seconds: float, warmup: float, moos_bin: Path | None) -> dict[str,
         try:
             time.sleep(warmup)
             pids = {"fleetlog": rec.proc.pid, "bare": bare.proc.pid}
+            if other is not None:
+                pids["also"] = other.proc.pid
             if plogger is not None:
                 pids["pLogger"] = plogger.logger.pid
                 pids["MOOSDB"] = plogger.db.pid
@@ -56,6 +74,8 @@ def one_round(seconds: float, warmup: float, moos_bin: Path | None) -> dict[str,
             return {name: (end[name] - start[name]) * scale for name in pids}
         finally:
             rec.stop()
+            if other is not None:
+                other.stop()
             bare.proc.kill()
             bare.proc.wait()
             if plogger is not None:
@@ -67,6 +87,9 @@ def main() -> int:
     parser.add_argument("--seconds", type=float, default=10.0, help="measured window per round")
     parser.add_argument("--warmup", type=float, default=3.0, help="seconds before the window")
     parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument(
+        "--also", type=Path, help="a second fleetlog source tree to run beside (e.g. main)"
+    )
     args = parser.parse_args()
     folder = os.environ.get("MOOS_BIN", "")
     moos_bin = Path(folder) if folder and (Path(folder) / "pLogger").is_file() else None
@@ -76,7 +99,7 @@ def main() -> int:
     loads = []
     for _ in range(args.rounds):
         loads.append(float(loadavg()) if loadavg() != "?" else float("nan"))
-        rounds.append(one_round(args.seconds, args.warmup, moos_bin))
+        rounds.append(one_round(args.seconds, args.warmup, moos_bin, args.also))
     names = list(rounds[0])
     load = spread(loads, "{:.1f}")
     print(f"idle CPU-s per 10 s, {args.rounds} rounds of {args.seconds:g} s, load {load}")
@@ -88,6 +111,9 @@ def main() -> int:
         ratio = [r["fleetlog"] / max(r["pLogger"], 1e-9) for r in rounds]
         print(f"fleetlog / pLogger alone: {spread(ratio, '{:.2f}')}x")
     above = [r["fleetlog"] - r["bare"] for r in rounds]
+    if args.also is not None:
+        ratio = [r["also"] / max(r["fleetlog"], 1e-9) for r in rounds]
+        print(f"{args.also} / this tree: {spread(ratio, '{:.1f}')}x")
     print(f"fleetlog - bare subscriber: {spread(above, '{:.4f}')}")
     return 0
 
