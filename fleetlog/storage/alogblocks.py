@@ -1,0 +1,208 @@
+"""One block of alog text becomes entries: continuation lines, stray lines, cut tails.
+
+:func:`parse_block` splits a block into lines, finds each line's fields
+(:mod:`fleetlog.storage.alogfields`), joins continuation lines to the entry before them
+(before any entry, or after a comment, they are stray lines), follows the DATATYPE MARKING
+state, applies the cut-tail rules to a file's last entry (MOOS_FORMAT.md §12), runs the
+caller's ``where`` and types what it keeps (:mod:`fleetlog.storage.alogtypes`). The state a
+pass carries from block to block is a :class:`PassState`.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
+
+from fleetlog.moos.alog import DATATYPE_MARKING
+from fleetlog.storage.alogfields import overflow_fields, standard_layout
+from fleetlog.storage.alogtypes import exact_raw, typed
+
+if TYPE_CHECKING:
+    import polars as pl
+
+__all__ = ["Parsed", "PassState", "parse_block"]
+
+_BINARY_OPEN = "<MOOS_BINARY>"
+_BINARY_CLOSE = "</MOOS_BINARY>"
+
+
+@dataclass
+class PassState:
+    """The state one pass carries from block to block."""
+
+    lineno: int = 1  # the line number of the first line of the next block
+    mark: bool = False  # DATATYPE MARKING seen
+    entries: int = 0  # entries read so far (before ``where``)
+    where: Callable[[pl.DataFrame], pl.Series] | None = None
+    orphans: int = 0  # stray lines seen so far
+    reported: int = 0  # stray lines already reported (raise) or counted (skip)
+
+
+@dataclass
+class Parsed:
+    """What parsing one block gave."""
+
+    frame: pl.DataFrame  # the entries, with internal columns
+    consumed: int  # lines of the block that are done (the rest is carried)
+    mark: bool  # the DATATYPE MARKING state after the consumed lines
+    orphans: list[int]  # line numbers of stray lines
+    exact: bool  # the block was valid UTF-8
+    scanned: int = 0  # entries read (before ``where``)
+
+
+def parse_block(
+    pl: ModuleType,
+    text: str,
+    block: bytes | None,
+    state: PassState,
+    logstart: float | None,
+    want: frozenset[str],
+    *,
+    final: bool,
+    complete: bool,
+    mark_at_end: bool,
+    on_drop: Any,
+    at_head: bool = False,
+) -> Parsed:
+    """Parse the lines of ``text``; ``block`` is its bytes when they were not all UTF-8.
+
+    ``final``: the file ends here (the cut-tail rules apply to the last entry). ``at_head``:
+    the next line, not in ``text``, starts an entry, so every entry here is finished.
+    Otherwise the last entry may go on in the next block: it is left out (``consumed``).
+    """
+    col = pl.col
+    line = col("l")
+    lines = pl.DataFrame({"l": [text]}).select(line.str.split("\n").explode()).with_row_index("idx")
+    n = lines.height
+    # Every line as if it had the standard layout, and whether it has: one pass, the
+    # expressions evaluated in parallel.
+    source_field = line.str.slice(37, 16)
+    parsed = (
+        lines.lazy()
+        .select(
+            "idx",
+            "l",
+            std=standard_layout(pl),
+            offset=line.str.slice(0, 16).str.strip_chars_end(" ").cast(pl.Float64, strict=False),
+            var=line.str.slice(16, 21).str.strip_chars_end(" "),
+            source=source_field.str.strip_chars_end(" "),
+            v=line.str.slice(53),
+        )
+        .collect()
+    )
+    std_mask = parsed["std"]
+    parsed = parsed.with_columns(
+        kpos=pl.lit(16, pl.Int32), spos=pl.lit(37, pl.Int32), vpos=pl.lit(53, pl.Int32)
+    )
+    rest = lines.filter(~std_mask)
+    general_idx = None
+    entry_mask = std_mask
+    if rest.height:
+        candidates = rest.filter(line.str.contains(r"^-?[0-9]"))
+        if candidates.height:
+            general = overflow_fields(pl, candidates)
+            if general.height:
+                # the overflowing lines' fields replace the standard layout's, in place
+                general_idx = general["idx"]
+                parsed = parsed.with_columns(
+                    parsed[name].scatter(general_idx, general[name])
+                    for name in ("offset", "var", "source", "v", "kpos", "spos", "vpos")
+                )
+                entry_mask = std_mask.clone().scatter(general_idx, True)
+        comments = rest.filter(line.str.starts_with("%"))
+    else:
+        comments = rest
+    heads = parsed.filter(entry_mask).drop("std")
+    comment_idx = comments["idx"]
+    n_heads = heads.height + comments.height
+
+    # Continuation lines join the entry before them; before any entry, or after a comment,
+    # they are stray lines.
+    orphans: list[int] = []
+    cont = pl.lit(None, pl.String)
+    if n_heads < n:
+        is_head = std_mask.clone()
+        is_head = is_head.scatter(comment_idx, True) if comments.height else is_head
+        is_head = is_head.scatter(general_idx, True) if general_idx is not None else is_head
+        is_entry = entry_mask
+        tagged = lines.with_columns(
+            gid=is_head.cast(pl.Int32).cum_sum(), head=is_head, entry=is_entry
+        )
+        owner = tagged.filter(col("head")).select("gid", "entry")
+        conts = tagged.filter(~col("head")).drop("entry").join(owner, on="gid", how="left")
+        conts = conts.with_columns(col("entry").fill_null(False))
+        stray = conts.filter(~col("entry"))
+        orphans = [int(i) + state.lineno for i in stray["idx"]]
+        attached = conts.filter(col("entry"))
+        if attached.height:
+            joined = attached.group_by("gid", maintain_order=True).agg(
+                col("l").str.join("\n").alias("c")
+            )
+            # the entry that owns group g is the head line at the g-th head
+            head_idx = tagged.filter(col("head"))["idx"]
+            joined = joined.with_columns(idx=head_idx.gather(joined["gid"] - 1)).drop("gid")
+            heads = heads.join(joined, on="idx", how="left", maintain_order="left")
+            cont = col("c")
+    if "c" not in heads.columns:
+        heads = heads.with_columns(c=cont)
+
+    # The DATATYPE MARKING state where each entry was finished (at the next head, or at the
+    # end of the file): the line parser classified an entry then.
+    end_mark = state.mark
+    mark_lines = comments.filter(line == DATATYPE_MARKING)["idx"] if comments.height else None
+    mark: Any = state.mark
+    if not state.mark and mark_lines is not None and mark_lines.len():
+        end_mark = True
+        first = int(mark_lines[0])
+        # entries after the marking line, and the one it finished (no comment in between)
+        before = heads["idx"].filter(heads["idx"] < first)
+        finisher = -1
+        if before.len():
+            last = int(before[-1])
+            if not comment_idx.filter((comment_idx > last) & (comment_idx < first)).len():
+                finisher = last
+        mark = (col("idx") > first) | (col("idx") == finisher)
+
+    # What is done: in a non-final block, the last entry may go on in the next block.
+    consumed = n
+    last_head = max(
+        int(heads["idx"][-1]) if heads.height else -1,
+        int(comment_idx[-1]) if comments.height else -1,
+    )
+    last_is_entry = heads.height > 0 and int(heads["idx"][-1]) == last_head
+    dropped = False
+    if last_is_entry and not final and not at_head:
+        consumed = last_head
+        heads = heads.slice(0, heads.height - 1)
+    elif last_is_entry and final:
+        # the last entry: whole only if the file was, and if it ends with its terminator
+        value = heads["v"][-1]
+        more = heads["c"][-1]
+        last_part = more.rsplit("\n", 1)[-1] if more is not None else value
+        terminated = last_part.endswith(" ") or (
+            value.startswith(_BINARY_OPEN) and last_part.endswith(_BINARY_CLOSE)
+        )
+        if not complete or not terminated:
+            heads = heads.slice(0, heads.height - 1)
+            dropped = True
+        elif mark_at_end and not end_mark:
+            mark = pl.when(col("idx") == last_head).then(True).otherwise(pl.lit(mark))
+    if dropped:
+        on_drop()
+    scanned = heads.height
+    if state.where is not None and heads.height:
+        keep = state.where(
+            heads.select(
+                line=(col("idx") + state.lineno).cast(pl.Int64),
+                offset="offset",
+                var="var",
+                source="source",
+            )
+        )
+        heads = heads.filter(keep)
+    frame = typed(pl, heads, mark, state.lineno, logstart, want, cont is not None)
+    if block is not None:
+        frame = exact_raw(pl, frame, block, state.lineno)
+    return Parsed(frame, consumed, end_mark, orphans, block is None, scanned)

@@ -1,0 +1,152 @@
+"""Where an alog line's columns are: the writer's column rule, vectorised over lines.
+
+pLogger left-justifies the time, the variable and the source to 15, 20 and 15 characters
+(or wider), each followed by one space; the value is the rest. :func:`standard_layout`
+recognises the lines whose fields all fit their columns (nearly all), so their fields are
+cut at fixed places; :func:`overflow_fields` splits the others by the rule itself.
+:func:`entry_start` and :func:`line_start` find where to cut a block of bytes so that it
+ends with whole entries.
+"""
+
+from __future__ import annotations
+
+from types import ModuleType
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    import polars as pl
+
+__all__ = ["entry_start", "line_start", "overflow_fields", "standard_layout", "starts_entry"]
+
+#: Lines looked at, from the end of a block, for an entry to cut the block before.
+_CUT_LOOKBACK = 64
+
+# The standard layout: no field wider than its column, so the value starts at character 53.
+_STD_TIME = r"^-?[0-9]+(?:\.[0-9]*)?(?:[eE][-+]?[0-9]+)? +$"
+_STD_KEY = r"^[^ ]+ +$"
+_STD_SOURCE = r"^[^ ]* +$"
+_TIME = r"^-?[0-9]+(?:\.[0-9]*)?(?:[eE][-+]?[0-9]+)?$"
+
+
+def starts_entry(line: bytes) -> bool:
+    """Whether a line starts like an entry: a digit, or ``-`` and a digit."""
+    # ASCII digits only: a time column never starts otherwise.
+    if not line:
+        return False
+    c = line[0]
+    if 0x30 <= c <= 0x39:
+        return True
+    return c == 0x2D and len(line) > 1 and 0x30 <= line[1] <= 0x39
+
+
+def entry_start(pl: ModuleType, buf: bytes, end: int) -> int | None:
+    """Return where the last entry line of ``buf[:end]`` starts (not at 0), or None.
+
+    Looks at the last :data:`_CUT_LOOKBACK` whole lines only, with the reader's own rule
+    for an entry line (so a block cut there ends with whole entries).
+    """
+    starts: list[int] = []
+    pos = end
+    while len(starts) < _CUT_LOOKBACK and pos > 0:
+        start = buf.rfind(b"\n", 0, pos) + 1
+        if start == 0:
+            break
+        starts.append(start)
+        pos = start - 1
+    if not starts:
+        return None
+    ends = [end, *(start - 1 for start in starts[:-1])]
+    texts = [
+        buf[a:b].decode("utf-8", "fleetlog.byte-per-char")
+        for a, b in zip(starts, ends, strict=True)
+    ]
+    lines = pl.DataFrame({"l": texts}).with_row_index("idx")
+    entries = lines.filter(standard_layout(pl))["idx"].to_list()
+    others = lines.filter(~standard_layout(pl) & pl.col("l").str.contains(r"^-?[0-9]"))
+    if others.height:
+        entries += overflow_fields(pl, others)["idx"].to_list()
+    return starts[min(entries)] if entries else None
+
+
+def line_start(buf: bytes, end: int, lines: int) -> int:
+    """Return where the last ``lines`` lines of ``buf[:end]`` start (``end`` if none)."""
+    if lines <= 0:
+        return end + 1
+    pos = end
+    for _ in range(lines):
+        pos = buf.rfind(b"\n", 0, pos)
+        if pos < 0:
+            return 0
+    return pos + 1
+
+
+def _all_spaces(pl: ModuleType, expr: Any, width: Any) -> Any:
+    """An expression: ``expr`` holds at least ``width`` characters, the first ``width`` spaces."""
+    return (expr.str.len_chars() >= width) & (
+        expr.str.slice(0, width).str.strip_chars_start(" ").str.len_bytes() == 0
+    )
+
+
+def standard_layout(pl: ModuleType) -> Any:
+    """An expression: the line ``l`` is an entry with no field wider than its column."""
+    line = pl.col("l")
+    source_field = line.str.slice(37, 16)
+    return (
+        source_field.str.len_chars().eq(16)
+        & line.str.slice(0, 16).str.contains(_STD_TIME)
+        & line.str.slice(16, 21).str.contains(_STD_KEY)
+        & source_field.str.contains(_STD_SOURCE)
+    )
+
+
+def overflow_fields(pl: ModuleType, lines: pl.DataFrame) -> pl.DataFrame:
+    """Split lines whose columns overflow (or are not entries) by the writer's column rule.
+
+    Follows the columns: each field is left-justified to its width (15, 20, 15) or wider,
+    then one separator space. Returns the lines that are entries, with their fields and
+    the character positions of the key, source and value.
+    """
+    col = pl.col
+    zero = pl.lit(0)
+    frame = (
+        lines.lazy()
+        .with_columns(col("l").str.splitn(" ", 2).struct.rename_fields(["t", "r1"]).alias("p"))
+        .unnest("p")
+        .with_columns(lt=col("t").str.len_chars().cast(pl.Int64))
+        .with_columns(pad1=pl.max_horizontal(15 - col("lt"), zero))
+        .filter(
+            col("r1").is_not_null()
+            & col("t").str.contains(_TIME)
+            & _all_spaces(pl, col("r1"), col("pad1"))
+        )
+        .with_columns(r1k=col("r1").str.slice(col("pad1")))
+        .filter((col("r1k").str.len_bytes() > 0) & ~col("r1k").str.starts_with(" "))
+        .with_columns(col("r1k").str.splitn(" ", 2).struct.rename_fields(["k", "r2"]).alias("p"))
+        .unnest("p")
+        .with_columns(lk=col("k").str.len_chars().cast(pl.Int64))
+        .with_columns(pad2=pl.max_horizontal(20 - col("lk"), zero))
+        .filter(col("r2").is_not_null() & _all_spaces(pl, col("r2"), col("pad2")))
+        .with_columns(r3=col("r2").str.slice(col("pad2")))
+        .with_columns(col("r3").str.splitn(" ", 2).struct.rename_fields(["s", "r4"]).alias("p"))
+        .unnest("p")
+        .with_columns(ls=col("s").str.len_chars().cast(pl.Int64))
+        .with_columns(pad3=pl.max_horizontal(15 - col("ls"), zero))
+        .filter(col("r4").is_not_null() & _all_spaces(pl, col("r4"), col("pad3")))
+        .with_columns(
+            kpos=pl.max_horizontal(col("lt"), pl.lit(15)) + 1,
+        )
+        .with_columns(spos=col("kpos") + pl.max_horizontal(col("lk"), pl.lit(20)) + 1)
+        .with_columns(vpos=col("spos") + pl.max_horizontal(col("ls"), pl.lit(15)) + 1)
+        .select(
+            "idx",
+            "l",
+            offset=col("t").cast(pl.Float64, strict=False),
+            var="k",
+            source="s",
+            v=col("r4").str.slice(col("pad3")),
+            kpos=col("kpos").cast(pl.Int32),
+            spos=col("spos").cast(pl.Int32),
+            vpos=col("vpos").cast(pl.Int32),
+        )
+    )
+    return frame.collect()
