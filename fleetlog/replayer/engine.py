@@ -57,7 +57,7 @@ from fleetlog.replayer.filters import EntryFilter, FilterSpec
 from fleetlog.replayer.inputs import ReplayInput
 from fleetlog.replayer.report import Lateness, State, Status, Summary, VehicleCounts
 from fleetlog.replayer.schedule import DEDUPE_MEMORY, DEFAULT_WINDOW, Item, Schedule
-from fleetlog.wire.message import Kind, MoosMessage
+from fleetlog.wire.message import Kind, MoosMessage, new_message
 
 __all__ = ["DB_TIME_SOURCE", "MAX_CHOKE_TIME", "TICK", "PlayOptions", "Player", "Publish"]
 
@@ -492,8 +492,9 @@ class Player:
         if self.options.db_time:
             self._db_time(vehicle, item, wall)
         source, aux, community = self._split(entry.source)
+        # new_message: the frozen MoosMessage without its __init__'s seven __setattr__ calls
         self._publish(
-            vehicle, MoosMessage(entry.key, value, wall, source, aux, community, item.time)
+            vehicle, new_message(entry.key, value, wall, source, aux, community, item.time)
         )
         if due is not None:
             self._timing.add(clock.now() - due)

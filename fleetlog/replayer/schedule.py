@@ -28,7 +28,7 @@ from typing import NamedTuple
 from fleetlog.errors import StorageError
 from fleetlog.moos.alog import BinaryRef, Entry
 from fleetlog.replayer.inputs import ReplayInput
-from fleetlog.storage.readers import Record, merge_records
+from fleetlog.storage.ordering import IndexedRecord, merge_indexed
 
 __all__ = ["DEDUPE_MEMORY", "DEFAULT_WINDOW", "Item", "Schedule"]
 
@@ -91,12 +91,12 @@ class Schedule:
         self._memory = memory
         self._seen: set[int] = set()
         self._order: deque[int] = deque()
-        self._passes = [self._records(item) for item in inputs]
-        self._merge = merge_records(self._passes, window=window)
+        self._passes = [self._records(item, index) for index, item in enumerate(inputs)]
+        self._merge = merge_indexed(self._passes, window=window)
         self._run = self._items()
         self._ahead: deque[Item] = deque()
 
-    def _records(self, source: ReplayInput) -> Generator[Record, None, None]:
+    def _records(self, source: ReplayInput, index: int) -> Generator[IndexedRecord, None, None]:
         logstart = source.logstart
         entries = source.reader.entries()
         try:
@@ -104,7 +104,7 @@ class Schedule:
                 if entry.offset < 0:
                     self.before_logstart += 1
                     continue
-                yield Record(logstart + entry.offset, entry)
+                yield IndexedRecord(logstart + entry.offset, index, entry)
         finally:
             # Closing the pass closes its file now, not when the garbage collector runs.
             close = getattr(entries, "close", None)

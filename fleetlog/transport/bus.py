@@ -568,15 +568,41 @@ class MoosPublisher:
             msg = f"could not publish {name!r} on {key!r}: {err}"
             raise TransportError(msg) from err
 
+    def _put(
+        self,
+        name: str,
+        value: float | str | bytes,
+        time: float,
+        source: str,
+        aux: str,
+        community: str,
+        original_time: float | None,
+        vehicle: str,
+    ) -> None:
+        """:meth:`publish` with every field given, for :meth:`send` (no keyword handling)."""
+        kind, payload = encode_value(value)
+        key = self._key(vehicle, name)
+        attachment = encode_attachment(time, source, aux, community, original_time)
+        pub = self._publishers.get((key, kind))
+        if pub is None:
+            pub = self._publisher(key, kind)
+        try:
+            pub.put(payload, attachment=attachment)
+        except zenoh.ZError as err:
+            msg = f"could not publish {name!r} on {key!r}: {err}"
+            raise TransportError(msg) from err
+
     def send(self, message: MoosMessage, vehicle: str | None = None) -> None:
         """Publish a :class:`MoosMessage` as it is (its own time, source and community)."""
-        self.publish(
+        # The replayer's path, once per sample: straight to the put, no keyword arguments.
+        veh = self.vehicle if vehicle is None else vehicle
+        self._put(
             message.name,
             message.value,
-            time=message.time,
-            source=message.source,
-            aux=message.aux,
-            community=message.community or None,
-            original_time=message.original_time,
-            vehicle=vehicle,
+            message.time,
+            message.source,
+            message.aux,
+            message.community or veh,
+            message.original_time,
+            veh,
         )
