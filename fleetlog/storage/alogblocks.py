@@ -10,6 +10,7 @@ pass carries from block to block is a :class:`PassState`.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 from types import ModuleType
@@ -52,6 +53,27 @@ class Parsed:
     scanned: int = 0  # entries read (before ``where``)
 
 
+@functools.cache
+def _standard_fields(pl: ModuleType) -> tuple[Any, ...]:
+    """Every line's fields as if it had the standard layout, and whether it has (built once)."""
+    line = pl.col("l")
+    return (
+        pl.col("idx"),
+        line,
+        standard_layout(pl).alias("std"),
+        line.str.slice(0, 16)
+        .str.strip_chars_end(" ")
+        .cast(pl.Float64, strict=False)
+        .alias("offset"),
+        line.str.slice(16, 21).str.strip_chars_end(" ").alias("var"),
+        line.str.slice(37, 16).str.strip_chars_end(" ").alias("source"),
+        line.str.slice(53).alias("v"),
+        pl.lit(16, pl.Int32).alias("kpos"),
+        pl.lit(37, pl.Int32).alias("spos"),
+        pl.lit(53, pl.Int32).alias("vpos"),
+    )
+
+
 def parse_block(
     pl: ModuleType,
     text: str,
@@ -74,28 +96,18 @@ def parse_block(
     """
     col = pl.col
     line = col("l")
-    lines = pl.DataFrame({"l": [text]}).select(line.str.split("\n").explode()).with_row_index("idx")
-    n = lines.height
-    # Every line as if it had the standard layout, and whether it has: one pass, the
-    # expressions evaluated in parallel.
-    source_field = line.str.slice(37, 16)
+    # The lines, and every line as if it had the standard layout and whether it has: one
+    # query, its expressions evaluated in parallel.
     parsed = (
-        lines.lazy()
-        .select(
-            "idx",
-            "l",
-            std=standard_layout(pl),
-            offset=line.str.slice(0, 16).str.strip_chars_end(" ").cast(pl.Float64, strict=False),
-            var=line.str.slice(16, 21).str.strip_chars_end(" "),
-            source=source_field.str.strip_chars_end(" "),
-            v=line.str.slice(53),
-        )
+        pl.LazyFrame({"l": [text]})
+        .select(line.str.split("\n").explode())
+        .with_row_index("idx")
+        .select(*_standard_fields(pl))
         .collect()
     )
+    lines = parsed.select("idx", "l")
+    n = parsed.height
     std_mask = parsed["std"]
-    parsed = parsed.with_columns(
-        kpos=pl.lit(16, pl.Int32), spos=pl.lit(37, pl.Int32), vpos=pl.lit(53, pl.Int32)
-    )
     rest = lines.filter(~std_mask)
     general_idx = None
     entry_mask = std_mask
@@ -202,7 +214,16 @@ def parse_block(
             )
         )
         heads = heads.filter(keep)
-    frame = typed(pl, heads, mark, state.lineno, logstart, want, cont is not None)
+    frame = typed(
+        pl,
+        heads,
+        mark,
+        state.lineno,
+        logstart,
+        want,
+        cont is not None,
+        _BINARY_OPEN in text,
+    )
     if block is not None:
         frame = exact_raw(pl, frame, block, state.lineno)
     return Parsed(frame, consumed, end_mark, orphans, block is None, scanned)

@@ -10,6 +10,7 @@ ends with whole entries.
 
 from __future__ import annotations
 
+import functools
 from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
@@ -87,6 +88,7 @@ def _all_spaces(pl: ModuleType, expr: Any, width: Any) -> Any:
     )
 
 
+@functools.cache
 def standard_layout(pl: ModuleType) -> Any:
     """An expression: the line ``l`` is an entry with no field wider than its column."""
     line = pl.col("l")
@@ -106,47 +108,61 @@ def overflow_fields(pl: ModuleType, lines: pl.DataFrame) -> pl.DataFrame:
     then one separator space. Returns the lines that are entries, with their fields and
     the character positions of the key, source and value.
     """
+    frame = lines.lazy()
+    for method, args, kwargs in _overflow_plan(pl):
+        frame = getattr(frame, method)(*args, **kwargs)
+    return frame.collect()
+
+
+@functools.cache
+def _overflow_plan(pl: ModuleType) -> tuple[tuple[str, tuple[Any, ...], dict[str, Any]], ...]:
+    """The steps of :func:`overflow_fields`, as (LazyFrame method, args, kwargs), built once."""
     col = pl.col
     zero = pl.lit(0)
-    frame = (
-        lines.lazy()
-        .with_columns(col("l").str.splitn(" ", 2).struct.rename_fields(["t", "r1"]).alias("p"))
-        .unnest("p")
-        .with_columns(lt=col("t").str.len_chars().cast(pl.Int64))
-        .with_columns(pad1=pl.max_horizontal(15 - col("lt"), zero))
-        .filter(
-            col("r1").is_not_null()
-            & col("t").str.contains(_TIME)
-            & _all_spaces(pl, col("r1"), col("pad1"))
-        )
-        .with_columns(r1k=col("r1").str.slice(col("pad1")))
-        .filter((col("r1k").str.len_bytes() > 0) & ~col("r1k").str.starts_with(" "))
-        .with_columns(col("r1k").str.splitn(" ", 2).struct.rename_fields(["k", "r2"]).alias("p"))
-        .unnest("p")
-        .with_columns(lk=col("k").str.len_chars().cast(pl.Int64))
-        .with_columns(pad2=pl.max_horizontal(20 - col("lk"), zero))
-        .filter(col("r2").is_not_null() & _all_spaces(pl, col("r2"), col("pad2")))
-        .with_columns(r3=col("r2").str.slice(col("pad2")))
-        .with_columns(col("r3").str.splitn(" ", 2).struct.rename_fields(["s", "r4"]).alias("p"))
-        .unnest("p")
-        .with_columns(ls=col("s").str.len_chars().cast(pl.Int64))
-        .with_columns(pad3=pl.max_horizontal(15 - col("ls"), zero))
-        .filter(col("r4").is_not_null() & _all_spaces(pl, col("r4"), col("pad3")))
-        .with_columns(
-            kpos=pl.max_horizontal(col("lt"), pl.lit(15)) + 1,
-        )
-        .with_columns(spos=col("kpos") + pl.max_horizontal(col("lk"), pl.lit(20)) + 1)
-        .with_columns(vpos=col("spos") + pl.max_horizontal(col("ls"), pl.lit(15)) + 1)
-        .select(
-            "idx",
-            "l",
-            offset=col("t").cast(pl.Float64, strict=False),
-            var="k",
-            source="s",
-            v=col("r4").str.slice(col("pad3")),
-            kpos=col("kpos").cast(pl.Int32),
-            spos=col("spos").cast(pl.Int32),
-            vpos=col("vpos").cast(pl.Int32),
-        )
+    plan: list[tuple[str, tuple[Any, ...], dict[str, Any]]] = []
+
+    def step(method: str, *args: Any, **kwargs: Any) -> None:
+        plan.append((method, args, kwargs))
+
+    step("with_columns", col("l").str.splitn(" ", 2).struct.rename_fields(["t", "r1"]).alias("p"))
+    step("unnest", "p")
+    step("with_columns", lt=col("t").str.len_chars().cast(pl.Int64))
+    step("with_columns", pad1=pl.max_horizontal(15 - col("lt"), zero))
+    step(
+        "filter",
+        col("r1").is_not_null()
+        & col("t").str.contains(_TIME)
+        & _all_spaces(pl, col("r1"), col("pad1")),
     )
-    return frame.collect()
+    step("with_columns", r1k=col("r1").str.slice(col("pad1")))
+    step("filter", (col("r1k").str.len_bytes() > 0) & ~col("r1k").str.starts_with(" "))
+    step("with_columns", col("r1k").str.splitn(" ", 2).struct.rename_fields(["k", "r2"]).alias("p"))
+    step("unnest", "p")
+    step("with_columns", lk=col("k").str.len_chars().cast(pl.Int64))
+    step("with_columns", pad2=pl.max_horizontal(20 - col("lk"), zero))
+    step("filter", col("r2").is_not_null() & _all_spaces(pl, col("r2"), col("pad2")))
+    step("with_columns", r3=col("r2").str.slice(col("pad2")))
+    step("with_columns", col("r3").str.splitn(" ", 2).struct.rename_fields(["s", "r4"]).alias("p"))
+    step("unnest", "p")
+    step("with_columns", ls=col("s").str.len_chars().cast(pl.Int64))
+    step("with_columns", pad3=pl.max_horizontal(15 - col("ls"), zero))
+    step("filter", col("r4").is_not_null() & _all_spaces(pl, col("r4"), col("pad3")))
+    step(
+        "with_columns",
+        kpos=pl.max_horizontal(col("lt"), pl.lit(15)) + 1,
+    )
+    step("with_columns", spos=col("kpos") + pl.max_horizontal(col("lk"), pl.lit(20)) + 1)
+    step("with_columns", vpos=col("spos") + pl.max_horizontal(col("ls"), pl.lit(15)) + 1)
+    step(
+        "select",
+        "idx",
+        "l",
+        offset=col("t").cast(pl.Float64, strict=False),
+        var="k",
+        source="s",
+        v=col("r4").str.slice(col("pad3")),
+        kpos=col("kpos").cast(pl.Int32),
+        spos=col("spos").cast(pl.Int32),
+        vpos=col("vpos").cast(pl.Int32),
+    )
+    return tuple(plan)

@@ -50,7 +50,7 @@ def read_tail(path: str | os.PathLike[str], size: int) -> pl.DataFrame:
     pl = polars_module()
     cut = data.rfind(b"\n")
     tail = data[cut + 1 :]
-    want = frozenset(("line", "offset", "var", "source", "type", "double", "text"))
+    want = frozenset(("line", "offset", "var", "source", "type", "double", "text", "nlines"))
     columns = [name for name in SCHEMA if name in want]
     if cut < 0:
         return typed(pl, _no_heads(pl), pl.lit(False), 1, None, want).select(columns)
@@ -81,7 +81,7 @@ def parse_lines(data: bytes, *, final: bool = False) -> tuple[pl.DataFrame, int]
     ``offset``, ``var``, ``source``, ``type``, ``double``, ``text``.
     """
     pl = polars_module()
-    want = frozenset(("line", "offset", "var", "source", "type", "double", "text"))
+    want = frozenset(("line", "offset", "var", "source", "type", "double", "text", "nlines"))
     columns = [name for name in SCHEMA if name in want]
     end = data.rfind(b"\n")
     if end < 0:

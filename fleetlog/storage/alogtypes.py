@@ -7,11 +7,12 @@ tag without terminator space is binary. :func:`typed` computes only the columns 
 
 from __future__ import annotations
 
+import functools
 from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
 from fleetlog.moos.alog import split_source
-from fleetlog.storage.columns import ALWAYS, TYPES
+from fleetlog.storage.columns import TYPES
 
 if TYPE_CHECKING:
     import polars as pl
@@ -30,13 +31,55 @@ def typed(
     logstart: float | None,
     want: frozenset[str],
     continued: bool = True,
+    binary: bool = True,
 ) -> pl.DataFrame:
     """Turn entry heads (fields of the first line, continuation text) into typed columns.
 
     ``mark`` is a bool when the whole block has one DATATYPE MARKING state (nearly always:
     the expressions are then simpler), else an expression; ``continued`` says whether any
-    entry has continuation lines.
+    entry has continuation lines; ``binary`` whether any value may be a binary reference
+    (the block holds ``<MOOS_BINARY>``: without it, the tag's regex is not run on every value).
     """
+    names = [name for name in _OUTPUTS if name in want]
+    extra = [name for name in ("kpos", "spos", "vpos") if name in heads.columns]
+    frame = heads.lazy()
+    if isinstance(mark, bool):
+        steps = _steps(pl, mark, continued, binary)
+    else:  # the marking starts inside this block (once a file): not worth a cache entry
+        steps = _build_steps(pl, mark, continued, binary)
+    for step in steps:
+        frame = frame.with_columns(**step)
+    outputs = _outputs(pl)
+    first = pl.lit(first_line, pl.Int64)
+    per_block = {
+        "line": (pl.col("idx").cast(pl.Int64) + first).alias("line"),
+        "time": (
+            (pl.col("offset") + logstart) if logstart is not None else pl.lit(None, pl.Float64)
+        ).alias("time"),
+    }
+    exprs = [per_block[name] if name in per_block else outputs[name] for name in names]
+    result = frame.select(*exprs, *extra).collect()
+    if "src" in want or "aux" in want:
+        result = _with_source_parts(pl, result)
+    return result
+
+
+#: The columns typed() can compute, in this order.
+_OUTPUTS = ("line", "offset", "time", "var", "source", "type", "double", "text", "raw", "nlines")
+
+
+@functools.cache
+def _steps(pl: ModuleType, mark: bool, continued: bool, binary: bool) -> tuple[dict[str, Any], ...]:
+    """Return the intermediate columns of :func:`typed`, built once per case.
+
+    Expressions are immutable, and building them costs more Python than applying them.
+    """
+    return _build_steps(pl, mark, continued, binary)
+
+
+def _build_steps(
+    pl: ModuleType, mark: Any, continued: bool, binary: bool
+) -> tuple[dict[str, Any], ...]:
     col = pl.col
     text0 = col("text0")
     value = (
@@ -44,52 +87,54 @@ def typed(
         if continued
         else col("v")
     )
-    frame = heads.lazy().with_columns(value=value)
-    frame = frame.with_columns(
-        term=col("value").str.ends_with(" "), text0=col("value").str.strip_suffix(" ")
+    steps: list[dict[str, Any]] = [
+        {"value": value},
+        {"term": col("value").str.ends_with(" "), "text0": col("value").str.strip_suffix(" ")},
+    ]
+    is_binary = ~col("term") & text0.str.contains(_BINARY) if binary else pl.lit(False)
+    padded = text0.str.len_bytes() == pl.max_horizontal(
+        pl.lit(12, pl.UInt32), col("body").str.len_bytes()
     )
     if mark is False:
-        frame = frame.with_columns(
-            binary=~col("term") & text0.str.contains(_BINARY),
-            dmark=pl.lit(False),
-            smark=pl.lit(False),
-            body=text0.str.strip_chars_end(" "),
-        ).with_columns(
-            double=~col("binary")
-            & col("body").str.contains(_DOUBLE)
-            & (
-                text0.str.len_bytes()
-                == pl.max_horizontal(pl.lit(12, pl.UInt32), col("body").str.len_bytes())
-            )
-        )
+        steps += [
+            {
+                "binary": is_binary,
+                "dmark": pl.lit(False),
+                "smark": pl.lit(False),
+                "body": text0.str.strip_chars_end(" "),
+            },
+            {"double": ~col("binary") & col("body").str.contains(_DOUBLE) & padded},
+        ]
     else:
-        frame = frame.with_columns(
-            mk=pl.lit(True) if mark is True else mark,
-        ).with_columns(
-            binary=~col("term") & text0.str.contains(_BINARY),
-            dmark=col("mk") & text0.str.starts_with("D:"),
-            smark=col("mk") & text0.str.starts_with("S:"),
-            body=text0.str.strip_chars_end(" "),
-        )
-        body = (
-            pl.when(col("dmark"))
-            .then(text0.str.slice(2).str.strip_chars_end(" "))
-            .otherwise("body")
-        )
-        frame = frame.with_columns(body=body).with_columns(
-            double=~col("binary")
-            & col("body").str.contains(_DOUBLE)
-            & pl.when(col("mk"))
-            .then(col("dmark"))
-            .otherwise(
-                text0.str.len_bytes()
-                == pl.max_horizontal(pl.lit(12, pl.UInt32), col("body").str.len_bytes())
-            )
-        )
+        steps += [
+            {"mk": pl.lit(True) if mark is True else mark},
+            {
+                "binary": is_binary,
+                "dmark": col("mk") & text0.str.starts_with("D:"),
+                "smark": col("mk") & text0.str.starts_with("S:"),
+                "body": text0.str.strip_chars_end(" "),
+            },
+            {
+                "body": pl.when(col("dmark"))
+                .then(text0.str.slice(2).str.strip_chars_end(" "))
+                .otherwise("body")
+            },
+            {
+                "double": ~col("binary")
+                & col("body").str.contains(_DOUBLE)
+                & pl.when(col("mk")).then(col("dmark")).otherwise(padded)
+            },
+        ]
+    return tuple(steps)
+
+
+@functools.cache
+def _outputs(pl: ModuleType) -> dict[str, Any]:
+    """The output columns of :func:`typed` but ``line`` and ``time`` (per block)."""
+    col = pl.col
+    text0 = col("text0")
     exprs: dict[str, Any] = {
-        "line": (col("idx") + first_line).cast(pl.Int64),
         "offset": col("offset"),
-        "time": col("offset") + logstart if logstart is not None else pl.lit(None, pl.Float64),
         "var": col("var"),
         "source": col("source"),
         "type": pl.when(col("binary"))
@@ -112,27 +157,20 @@ def typed(
         .then(col("c").str.count_matches("\n") + 2)
         .otherwise(1),
     }
-    names = [name for name in exprs if name in want or name in ALWAYS]
-    extra = [name for name in ("kpos", "spos", "vpos") if name in heads.columns]
-    result = frame.select(*(exprs[name].alias(name) for name in names), *extra).collect()
-    if "src" in want or "aux" in want:
-        result = _with_source_parts(pl, result)
-    return result
+    return {name: expr.alias(name) for name, expr in exprs.items()}
 
 
 def _with_source_parts(pl: ModuleType, frame: pl.DataFrame) -> pl.DataFrame:
-    """Add ``src`` and ``aux``, computed once per distinct source."""
+    """Add ``src`` and ``aux``, computed once per distinct source (joined back on it)."""
     if not frame.height:
         return frame.with_columns(src=pl.col("source"), aux=pl.col("source"))
     sources = frame["source"].unique().to_list()
     parts = [split_source(s) for s in sources]
-    src = pl.Series([p[0] for p in parts], dtype=pl.String)
-    aux = pl.Series([p[1] for p in parts], dtype=pl.String)
-    old = pl.Series(sources, dtype=pl.String)
-    return frame.with_columns(
-        src=pl.col("source").replace_strict(old, src, return_dtype=pl.String),
-        aux=pl.col("source").replace_strict(old, aux, return_dtype=pl.String),
+    table = pl.DataFrame(
+        {"source": sources, "src": [p[0] for p in parts], "aux": [p[1] for p in parts]},
+        schema={"source": pl.String, "src": pl.String, "aux": pl.String},
     )
+    return frame.join(table, on="source", how="left", maintain_order="left")
 
 
 def exact_raw(pl: ModuleType, frame: pl.DataFrame, block: bytes, first_line: int) -> pl.DataFrame:
