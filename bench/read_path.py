@@ -10,8 +10,9 @@ round:
 (d) grep: ``fleetlog.tools.grep_log`` of NAV_X to /dev/null (what ``fleetlog grep`` does);
 (e) line parser: the oracle's ``AlogReader.entries()`` (tests/alog_oracle.py), the old path.
 
-Rates are lines (entries) per second; ratios per round against (a). Run it short: the
-machine's two cores are shared.
+Rates are lines (entries) per second; ratios per round against (a); ``cpu`` is the process's
+CPU seconds for the run (all threads), the figure that holds when the shared machine is
+loaded. Run it short: the machine's two cores are shared.
 
     python bench/read_path.py                 # 1M lines, 3 rounds
     python bench/read_path.py -n 300000 --rounds 2 --threads 1
@@ -143,16 +144,18 @@ def main() -> None:
     )
     rates: dict[str, list[float]] = {name: [] for name in RUNS}
     ratios: dict[str, list[float]] = {name: [] for name in RUNS}
+    cpus: dict[str, list[float]] = {name: [] for name in RUNS}
     skip = set(filter(None, args.skip.split(",")))
     for _ in range(args.rounds):
         base = 0.0
         for name, run in RUNS.items():
             if name in skip:
                 continue
-            start = time.perf_counter()
+            start, cpu = time.perf_counter(), time.process_time()
             run(args.file)
             rate = lines / (time.perf_counter() - start)
             rates[name].append(rate)
+            cpus[name].append(time.process_time() - cpu)
             if name == "split":
                 base = rate
             ratios[name].append(rate / base)
@@ -161,9 +164,11 @@ def main() -> None:
             continue
         r = sorted(rates[name])
         q = sorted(ratios[name])
+        c = sorted(cpus[name])
         print(
             f"{name:12s} {r[len(r) // 2] / 1e6:5.2f}M lines/s [{r[0] / 1e6:.2f}-{r[-1] / 1e6:.2f}]"
             f"  x split {q[len(q) // 2]:.2f} [{q[0]:.2f}-{q[-1]:.2f}]"
+            f"  cpu {c[len(c) // 2]:.2f} s [{c[0]:.2f}-{c[-1]:.2f}]"
         )
     print(f"load after {os.getloadavg()[0]:.2f}")
 

@@ -109,17 +109,49 @@ def encode_grep_line(item: GrepHeader | GrepRecord | GrepEnd) -> bytes:
     return dump_json(obj) + b"\n"
 
 
+_RECORD_SETTERS = tuple(
+    GrepRecord.__dict__[name].__set__
+    for name in ("offset", "key", "source", "kind", "text", "lineno")
+)
+
+
 def _grep_record(obj: list[Any]) -> GrepRecord:
-    if (
-        len(obj) != 6
-        or not isinstance(obj[0], int | float)
-        or not all(isinstance(x, str) for x in obj[1:5])
-        or obj[3] not in _KINDS
-        or not isinstance(obj[5], int)
-    ):
+    if len(obj) != 6:
         msg = "grep reply: an entry is not [time, var, source, kind, text, line]"
         raise FormatError(msg)
-    return GrepRecord(float(obj[0]), obj[1], obj[2], obj[3], obj[4], obj[5])
+    offset, key, source, kind, text, lineno = obj
+    if (
+        type(key) is not str
+        or type(source) is not str
+        or type(text) is not str
+        or type(lineno) is not int
+        or type(kind) is not str
+        or kind not in _KINDS
+        or type(offset) not in (float, int)
+    ) and not _loose_record(offset, key, source, kind, text, lineno):
+        msg = "grep reply: an entry is not [time, var, source, kind, text, line]"
+        raise FormatError(msg)
+    # A shore reads a record per matching line: set the frozen slots directly, as
+    # wire.message.new_message does, instead of the dataclass's six object.__setattr__.
+    record = object.__new__(GrepRecord)
+    s_offset, s_key, s_source, s_kind, s_text, s_lineno = _RECORD_SETTERS
+    s_offset(record, float(offset))
+    s_key(record, key)
+    s_source(record, source)
+    s_kind(record, kind)
+    s_text(record, text)
+    s_lineno(record, lineno)
+    return record
+
+
+def _loose_record(offset: Any, key: Any, source: Any, kind: Any, text: Any, lineno: Any) -> bool:
+    """The isinstance form of the record check (json gives exact types; bool is an int)."""
+    return (
+        isinstance(offset, int | float)
+        and all(isinstance(x, str) for x in (key, source, kind, text))
+        and kind in _KINDS
+        and isinstance(lineno, int)
+    )
 
 
 def decode_grep_lines(data: bytes) -> list[GrepHeader | GrepRecord | GrepEnd]:
