@@ -34,9 +34,11 @@ import re
 import stat
 import threading
 import time
+from collections import OrderedDict
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
+from typing import TypeVar
 
 from fleetlog.errors import FormatError, StorageError
 from fleetlog.moos.naming import HINT_FILE_NAME, parse_hint_file, parse_session_root
@@ -59,6 +61,12 @@ _DOWNLOAD_SUFFIXES = (".part", ".part.json", ".part.json.tmp")
 _META_TMP = META_NAME + ".tmp"
 _COMMUNITY_LINE = re.compile(r"^[ \t]*community[ \t]*=(.*)$", re.IGNORECASE | re.MULTILINE)
 _MOOS_HEAD = 64 << 10
+#: alogs whose details are kept (a few hundred bytes each), and alogs still being written
+#: whose scans are kept (their sets of variable names) to go on from where they stopped
+_MAX_DETAILS = 1024
+_MAX_SCANS = 4
+_BUSY_LOCKS = 16
+_T = TypeVar("_T")
 
 
 @dataclass
@@ -124,9 +132,11 @@ class LogCatalog:
         self._quiet = quiet
         self._clock = clock
         self._lock = threading.Lock()
-        self._details: dict[Path, _Details] = {}
-        self._scans: dict[Path, VariableScan] = {}
-        self._busy: dict[Path, threading.Lock] = {}
+        # Bounded: a recorder restarted every minute for months lists many thousands of
+        # sessions; what is kept per alog must not grow with them.
+        self._details: OrderedDict[Path, _Details] = OrderedDict()
+        self._scans: OrderedDict[Path, VariableScan] = OrderedDict()
+        self._busy = tuple(threading.Lock() for _ in range(_BUSY_LOCKS))
 
     # -- listing
 
@@ -344,24 +354,45 @@ class LogCatalog:
         identity = (st.st_ino, st.st_size, st.st_mtime_ns)
         with self._lock:
             known = self._details.get(path)
-            busy = self._busy.setdefault(path, threading.Lock())
         if known is not None and known.identity == identity:
             return known
-        with busy:
+        # one scan at a time per alog (a striped lock: a lock per path would be kept forever)
+        with self._busy[hash(path) % _BUSY_LOCKS]:
             with self._lock:
                 known = self._details.get(path)
+                scan = self._scans.pop(path, None)
             if known is not None and known.identity == identity:
+                if scan is not None:
+                    self._keep(self._scans, path, scan, _MAX_SCANS)
                 return known
             head = read_head(path)
-            scan = self._scans.get(path) or VariableScan(path)
+            scan = scan or VariableScan(path)
             scan.update()
             duration = scan.last_offset if is_compressed(path) else tail_offset(path)
             community = head.community or self._moos_community(session)
             details = _Details(identity, head, duration, scan.count, community)
+            # Only an alog that may still grow needs its scan (to go on from where it
+            # stopped); a complete one's details say all, and its set of names is let go.
+            growing = not is_compressed(path) and not self.is_complete(session)
             with self._lock:
-                self._scans[path] = scan
-                self._details[path] = details
+                if growing:
+                    self._keep(self._scans, path, scan, _MAX_SCANS)
+                self._keep(self._details, path, details, _MAX_DETAILS)
             return details
+
+    def cached(self) -> dict[str, int]:
+        """Return how much the catalog keeps: ``details`` and ``scans`` (alogs), ``names``."""
+        with self._lock:
+            names = sum(scan.count for scan in self._scans.values())
+            return {"details": len(self._details), "scans": len(self._scans), "names": names}
+
+    @staticmethod
+    def _keep(cache: OrderedDict[Path, _T], path: Path, value: _T, limit: int) -> None:
+        # Under the lock: the newest last; the oldest go beyond ``limit``.
+        cache[path] = value
+        cache.move_to_end(path)
+        while len(cache) > limit:
+            cache.popitem(last=False)
 
     def head(self, session: str) -> tuple[str, HeadInfo]:
         """Return a session's alog name and what its head says (for the remote grep).

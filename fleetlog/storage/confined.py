@@ -178,14 +178,15 @@ class _Running:
     ``busy``; ``pending`` holds ranges read ahead of it, by offset.
     """
 
-    __slots__ = ("busy", "hash", "offset", "pending", "size")
+    __slots__ = ("busy", "hash", "offset", "pending", "size", "touched")
 
-    def __init__(self, size: int) -> None:
+    def __init__(self, size: int, now: float) -> None:
         self.hash = hashlib.sha256()
         self.size = size
         self.offset = 0
         self.busy = False
         self.pending: dict[int, bytes] = {}
+        self.touched = now
 
     def take(self) -> memoryview | None:
         """Remove and return the pending bytes that continue the hash (None if none do).
@@ -217,15 +218,26 @@ class DigestCache:
     the end. Two requests for the same file hash it once: the second waits for the first.
     The cache keeps the newest ``max_entries`` digests and at most ``max_running`` digests in
     progress, which hold at most ``max_pending`` bytes of ranges read ahead of their turn
-    (beyond that, a range is left for :meth:`sha256` to read again).
+    (beyond that, a range is left for :meth:`sha256` to read again). A digest in progress is
+    let go as soon as its file changes (a newer version of the same inode starts one: the
+    old can never finish), and the ranges waiting in one that nobody fed for ``idle``
+    seconds (a fetch abandoned) give way to those of others.
     """
 
     def __init__(
-        self, max_entries: int = 4096, *, max_running: int = 8, max_pending: int = 16 << 20
+        self,
+        max_entries: int = 4096,
+        *,
+        max_running: int = 8,
+        max_pending: int = 16 << 20,
+        idle: float = 30.0,
+        clock: Callable[[], float] = time.monotonic,
     ) -> None:
         self._max = max_entries
         self._max_running = max_running
         self._max_pending = max_pending
+        self._idle = idle
+        self._clock = clock
         self._digests: dict[tuple[int, int, int, int], str] = {}
         self._running: dict[tuple[int, int, int, int], _Running] = {}
         self._lock = threading.Lock()
@@ -235,6 +247,40 @@ class DigestCache:
         """Return the digest of the file version ``st`` if it is already computed."""
         with self._lock:
             return self._digests.get(_identity(st))
+
+    def held(self) -> dict[str, int]:
+        """Return what the cache holds: ``digests``, ``running`` and ``pending`` (bytes)."""
+        with self._lock:
+            pending = sum(run.pending_bytes() for run in self._running.values())
+            return {
+                "digests": len(self._digests),
+                "running": len(self._running),
+                "pending": pending,
+            }
+
+    def _start(self, key: tuple[int, int, int, int], size: int) -> _Running | None:
+        # Under the lock: a digest of this file version begins; older versions of the same
+        # file (device, inode) can never finish, so what they hold is let go now.
+        for other in [k for k, r in self._running.items() if k[:2] == key[:2] and not r.busy]:
+            del self._running[other]
+        if not self._make_room():
+            return None
+        run = self._running[key] = _Running(size, self._clock())
+        return run
+
+    def _room_for(self, size: int) -> bool:
+        # Under the lock: whether ``size`` more pending bytes fit, after dropping the pending
+        # ranges of digests nobody fed for ``idle`` seconds (their fetch was abandoned; what
+        # they held is read from the disk again if the digest is ever asked for).
+        held = sum(run.pending_bytes() for run in self._running.values())
+        if held + size <= self._max_pending:
+            return True
+        stale = self._clock() - self._idle
+        for run in self._running.values():
+            if run.touched < stale and run.pending and not run.busy:
+                held -= run.pending_bytes()
+                run.pending.clear()
+        return held + size <= self._max_pending
 
     def feed(self, st: FileStat, offset: int, data: bytes) -> None:
         """Hash the bytes at ``offset`` of the file version ``st``, if they continue its digest.
@@ -250,16 +296,16 @@ class DigestCache:
             if not data or key in self._digests:
                 return
             run = self._running.get(key)
+            if run is None and offset == 0:
+                run = self._start(key, st.st_size)
             if run is None:
-                if offset != 0 or not self._make_room():
-                    return
-                run = self._running[key] = _Running(st.st_size)
+                return
+            run.touched = self._clock()
             end = offset + len(data)
             if end <= run.offset:
                 return
             if run.busy or offset > run.offset:
-                held = sum(r.pending_bytes() for r in self._running.values())
-                if offset not in run.pending and held + len(data) <= self._max_pending:
+                if offset not in run.pending and self._room_for(len(data)):
                     run.pending[offset] = data
                 return
             run.busy = True
@@ -324,8 +370,9 @@ class DigestCache:
                         raise _cancelled(shown)
                     self._changed.wait(0.5)
                 if run is None:
-                    self._make_room()
-                    run = self._running[key] = _Running(st.st_size)
+                    # without room, hashed all the same (it is asked for), kept only meanwhile
+                    run = self._start(key, st.st_size) or _Running(st.st_size, self._clock())
+                    self._running[key] = run
                 run.busy = True
             digest = ""
             complete = False
