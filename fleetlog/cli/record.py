@@ -44,6 +44,7 @@ from fleetlog.recorder.engine import Recorder
 from fleetlog.recorder.service import QUEUE, RecorderService, ServiceOptions
 from fleetlog.storage.catalog import LogCatalog
 from fleetlog.storage.columnar import limit_threads
+from fleetlog.storage.heap import HeapKeeper
 from fleetlog.transport.notify import Notifier, Watchdog
 from fleetlog.transport.queries import ZenohSession
 from fleetlog.transport.session import SessionOptions, open_session, summarize
@@ -428,7 +429,9 @@ def record(
         notifier.ready(f"recording vehicle {veh} into {where}")
 
     try:
-        view = service.run(on_ready=ready)
+        # the C heap's bursts (Zenoh's buffers, file ranges) must not ratchet up the RSS
+        with HeapKeeper():
+            view = service.run(on_ready=ready)
     finally:
         notifier.close()
     print(f"fleetlog: stopped: {view.summary()}", file=sys.stderr)

@@ -27,6 +27,7 @@ from fleetlog.errors import UsageError
 from fleetlog.query.server import LogServer
 from fleetlog.query.standby import Standby
 from fleetlog.storage.catalog import ALOG_SUFFIXES, LogCatalog
+from fleetlog.storage.heap import HeapKeeper
 from fleetlog.transport.queries import ZenohSession
 from fleetlog.transport.session import open_session
 
@@ -108,7 +109,7 @@ def serve(
         if standby:
             _standby(session, catalog, key_root, name, log_root, stop)
             return
-        with LogServer(session, catalog, root=key_root, announce=True):
+        with HeapKeeper(), LogServer(session, catalog, root=key_root, announce=True):
             _announce(catalog, log_root, name)
             while not stop.wait(0.5):
                 pass

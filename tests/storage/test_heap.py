@@ -1,0 +1,83 @@
+"""The heap keeper: it gives freed C heap back after a burst, and only then."""
+
+from __future__ import annotations
+
+import ctypes
+import ctypes.util
+
+from fleetlog.storage.heap import HeapKeeper, resident_bytes, trim_heap
+
+MiB = 1 << 20
+
+
+class Fake:
+    """A resident size the test sets, and a trim that brings it down to ``used``."""
+
+    def __init__(self, rss: int) -> None:
+        self.rss = rss
+        self.used = rss
+        self.now = 0.0
+        self.trims = 0
+
+    def trim(self) -> bool:
+        self.trims += 1
+        self.rss = self.used
+        return True
+
+
+def test_trims_after_growth_and_once_more_after_settling() -> None:
+    fake = Fake(100 * MiB)
+    keeper = HeapKeeper(
+        grow=32 * MiB,
+        settle=60.0,
+        resident=lambda: fake.rss,
+        trim=fake.trim,
+        clock=lambda: fake.now,
+    )
+    assert keeper.check() == 0  # the first look only learns where it stands
+    fake.rss += 31 * MiB
+    assert (keeper.check(), fake.trims) == (0, 0)  # below the threshold: nothing
+    fake.rss = 250 * MiB  # a burst freed, but kept by the allocator
+    assert (keeper.check(), fake.trims) == (150 * MiB, 1)
+    assert (keeper.check(), fake.trims) == (0, 1)  # flat: no trim
+    # A trim in the middle of a burst gives little back; what the burst frees later is
+    # given back once ``settle`` seconds passed, while the size stays above its lowest.
+    fake.used = 200 * MiB
+    fake.rss = 240 * MiB
+    fake.now = 10.0
+    assert (keeper.check(), fake.trims) == (40 * MiB, 2)
+    fake.used = 100 * MiB  # freed, but the resident size stays at 200 MiB until a trim
+    fake.now = 50.0
+    assert (keeper.check(), fake.trims) == (0, 2)
+    fake.now = 71.0
+    assert (keeper.check(), fake.trims) == (100 * MiB, 3)
+    assert keeper.stats == {"trims": 3, "released": 290 * MiB}
+
+
+def test_gives_back_what_the_c_heap_keeps() -> None:
+    # Real glibc: 120 MiB of 60 KB blocks, each pinned by a small block after it so the
+    # heap's top cannot shrink, touched, then freed: the allocator keeps them resident.
+    libc = ctypes.CDLL(ctypes.util.find_library("c"))
+    libc.malloc.restype = ctypes.c_void_p
+    libc.malloc.argtypes = [ctypes.c_size_t]
+    libc.free.argtypes = [ctypes.c_void_p]
+    assert trim_heap()
+    keeper = HeapKeeper(grow=32 * MiB)
+    keeper.check()
+    big, pins = [], []
+    for _ in range(2000):
+        block = libc.malloc(60_000)
+        ctypes.memset(block, 1, 60_000)
+        big.append(block)
+        pins.append(libc.malloc(64))
+    before = resident_bytes()
+    for block in big:
+        libc.free(block)
+    try:
+        assert before is not None
+        released = keeper.check()
+        assert released > 64 * MiB, released
+        assert keeper.stats["trims"] == 1
+    finally:
+        for pin in pins:
+            libc.free(pin)
