@@ -35,7 +35,7 @@ GROW = 32 << 20
 #: seconds between two looks at the resident size
 EVERY = 5.0
 #: seconds after a trim before the resident size above its lowest makes the keeper trim again
-SETTLE = 60.0
+SETTLE = 20.0
 
 
 def _load_trim() -> Callable[[int], int] | None:
