@@ -198,7 +198,13 @@ def main() -> int:
                 ops.publish("LOGGER_RESTART", "soak")
                 next_restart += args.restart
             replies = list(start_query(shore, f"fleet/{VEHICLE}/@fleetlog/status", timeout=5.0))
-            body = json.loads(replies[0].payload) if replies else {}
+            body: dict[str, Any] = {}
+            for reply in replies:  # an error reply (busy, at load 25) is not a status
+                try:
+                    body = json.loads(reply.payload)
+                    break
+                except ValueError:
+                    continue
             samples.append((now - started, rss_kb(rec.pid), body))
             print(
                 f"{now - started:6.0f} s  rss {samples[-1][1] / 1024:6.1f} MiB  received "
