@@ -250,6 +250,15 @@ def main() -> int:
                         duplicates += seen[i]
                         seen[i] = 1
         missing = len(published) - sum(seen)
+        # Where the missing ones are: runs of consecutive SEQ values (first, how many, seconds
+        # before the end of publishing), so a cut at the end tells itself from holes.
+        holes: list[tuple[int, int, float]] = []
+        i = seen.find(0)
+        while i != -1:
+            j = seen.find(1, i)
+            j = len(seen) if j == -1 else j
+            holes.append((i, j - i, round(published[-1] - published[i], 3)))
+            i = seen.find(0, j)
         minute2 = [kb for t, kb, _ in samples if 60 <= t < 120] or [samples[0][1]]
         last = [kb for t, kb, _ in samples if t >= samples[-1][0] - 60]
         final = samples[-1][2]
@@ -260,6 +269,9 @@ def main() -> int:
             "publish_seconds": done["t1"] - done["t0"],
             "missing": missing,
             "duplicates": duplicates,
+            "missing_runs": len(holes),
+            "missing_first_runs": holes[:5],
+            "missing_last_runs": holes[-5:],
             "sessions": len(sessions),
             "states": states,
             "gap_reasons": reasons,
