@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import os
 import sys
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -25,12 +26,13 @@ def budget(request: pytest.FixtureRequest) -> str:
 
 
 @pytest.fixture
-def fuzz(request: pytest.FixtureRequest, budget: str) -> Fuzzer:
+def fuzz(request: pytest.FixtureRequest, budget: str) -> Iterator[Fuzzer]:
     target = request.node.originalname.removeprefix("test_fuzz_")
-    return Fuzzer(target, budget)
+    yield Fuzzer(target, budget)
+    _write_report()  # after every target, so a long campaign cut short keeps its figures
 
 
-def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+def _write_report() -> None:
     path = os.environ.get("FLEETLOG_FUZZ_REPORT")
     if not path or not FIGURES:
         return
@@ -44,4 +46,10 @@ def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
             f"| {f.seconds:.1f} s | {'; '.join(f.notes)} |"
         )
     Path(path).write_text("\n".join(rows) + "\n", encoding="utf-8")
-    print(f"\nfuzz figures written to {path}", file=sys.stderr)
+
+
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    path = os.environ.get("FLEETLOG_FUZZ_REPORT")
+    if path and FIGURES:
+        _write_report()
+        print(f"\nfuzz figures written to {path}", file=sys.stderr)
