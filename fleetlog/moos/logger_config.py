@@ -10,10 +10,16 @@ and the setting.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Literal
 
 from fleetlog.errors import MissionError
+from fleetlog.moos.keep_settings import (
+    DiskSettings,
+    SnapshotSettings,
+    read_disk_settings,
+    read_snapshot_settings,
+)
 from fleetlog.moos.recording_modes import RecordingModes, read_recording_modes
 from fleetlog.moos.settings import FLOAT_RE as _FLOAT_RE
 from fleetlog.moos.settings import INT_RE as _INT_RE
@@ -198,6 +204,10 @@ class LoggerConfig:
             the session closes).
         modes: fleetlog's recording modes (``SplitSize``, ``SplitDuration``, ``StartPaused``,
             ``Note``, ``Tag``; :mod:`fleetlog.moos.recording_modes`).
+        snapshot: snapshot mode (``SnapshotSeconds``...; :mod:`fleetlog.moos.keep_settings`),
+            None when off.
+        disk: the disk guard and retention (``MinFreeDisk``, ``KeepSessions``,
+            ``MaxLogSize``).
     """
 
     app_name: str = "pLogger"
@@ -227,6 +237,8 @@ class LoggerConfig:
     moos_time_warp: float = 1.0
     fsync_interval: float = 1.0
     modes: RecordingModes = _NO_MODES
+    snapshot: SnapshotSettings | None = None
+    disk: DiskSettings = field(default_factory=DiskSettings)
 
     @classmethod
     def default(cls, app_name: str = "pLogger") -> LoggerConfig:
@@ -479,4 +491,6 @@ def logger_config(mission: Mission, app_name: str = "pLogger") -> LoggerConfig:
         moos_time_warp=_time_warp(mission),
         fsync_interval=_fsync_interval(reader),
         modes=read_recording_modes(block, mission.path, file_timestamp=file_timestamp),
+        snapshot=read_snapshot_settings(block, mission.path),
+        disk=read_disk_settings(block, mission.path),
     )

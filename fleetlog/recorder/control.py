@@ -49,8 +49,8 @@ __all__ = [
 RING_SIZE = 64
 #: control commands waiting for the drain thread; more are refused at once
 QUEUE_LIMIT = 16
-#: commands that fleetlog will take once snapshot mode exists (issue 17)
-NOT_YET = ("snapshot",)
+#: commands that fleetlog will take once they exist (none left since issue 17)
+NOT_YET: tuple[str, ...] = ()
 #: PLOGGER_CMD's fleetlog tasks that take no value (docs/compat.md, "Recording modes")
 _MODE_TASKS = ("PAUSE", "RESUME", "SPLIT")
 #: commands run in the control thread (they do not touch what is being recorded)
@@ -153,7 +153,7 @@ class CommandHandler:
             if msg.name == self.restart_var:
                 outcome = self._rec.restart()
             else:
-                outcome = self._plogger_cmd(value)
+                outcome = self._plogger_cmd(value, msg.source)
         except Exception as err:  # a peer's command must never stop the recording
             why = f"the command failed: {err}"
             self._rec.debug(f"{msg.name} {quote(text)} failed: {quote(str(err))}")
@@ -161,7 +161,7 @@ class CommandHandler:
         self._remember(outcome, when=msg.time, via=msg.name, source=msg.source, text=text)
         return outcome
 
-    def _plogger_cmd(self, value: float | str | bytes) -> Outcome:
+    def _plogger_cmd(self, value: float | str | bytes, msg_source: str) -> Outcome:
         rec = self._rec
         var = self.command_var
         if not isinstance(value, str):
@@ -176,6 +176,8 @@ class CommandHandler:
         bare = value.strip(" \t\r\n").upper()
         if bare in _MODE_TASKS:
             return self._mode(bare.lower())
+        if bare == "SNAPSHOT":
+            return rec.snapshot(f"{var} from {msg_source[:_QUOTE] or '?'}")
         head, sep, rest = value.partition("=")
         if sep and head.strip(" \t").upper() == "NOTE":
             return self._note_text(rest)
@@ -298,6 +300,8 @@ class CommandHandler:
             return rec.note(args["key"], args["value"])
         if cmd in ("pause", "resume", "split"):
             return self._mode(cmd)
+        if cmd == "snapshot":
+            return rec.snapshot(f"control from {request.source[:_QUOTE] or '?'}")
         return Outcome.refused(cmd, f"{cmd} is not a recorder command")
 
     def _ack(self, request: ControlRequest) -> Outcome:

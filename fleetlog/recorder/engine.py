@@ -35,8 +35,9 @@ from fleetlog.recorder.control import (
     quote,
 )
 from fleetlog.recorder.losses import LossLedger
-from fleetlog.recorder.modes import ModeKeeping, ModeState
+from fleetlog.recorder.modes import ModeState
 from fleetlog.recorder.sessions import Background, Health, MetaState, inline
+from fleetlog.recorder.snapshot_mode import SKEW_TOLERANCE, SnapshotState, SnapshotTaking
 from fleetlog.recorder.stats import RecorderStats
 from fleetlog.storage.metafile import boot_id, host_name
 from fleetlog.storage.procinfo import ProcessMonitor
@@ -47,8 +48,6 @@ from fleetlog.wire.version import WIRE_VERSION
 
 __all__ = ["SKEW_TOLERANCE", "Recorder", "RecorderStats"]
 
-#: pLogger's (MOOSMsg's) skew tolerance, seconds
-SKEW_TOLERANCE = 5.0
 #: MONITOR's check interval and tolerance, and LOGGER_DIRECTORY's republish interval
 MONITOR_INTERVAL = 10.0
 #: CMOOSApp's status period
@@ -104,7 +103,7 @@ class _AppStatus:
     subscribed: set[str] = field(default_factory=set)
 
 
-class Recorder(ModeKeeping):
+class Recorder(SnapshotTaking):
     """One vehicle's pLogger: sessions on disk from a stream of MOOS messages.
 
     Args:
@@ -167,7 +166,11 @@ class Recorder(ModeKeeping):
         self._sources: dict[tuple[str, str, str], str] = {}
         self.commands = CommandHandler(self, clock)
         #: the two command variables (LOGGER_RESTART, <APP>_CMD)
-        self._cmd_names = frozenset((self.commands.restart_var, self.commands.command_var))
+        #: (and in snapshot mode, the trigger variables: they are watched like commands)
+        snapshot = config.snapshot
+        triggers = [t.var for t in snapshot.triggers] if snapshot is not None else []
+        commands = (self.commands.restart_var, self.commands.command_var)
+        self._cmd_names = frozenset((*commands, *triggers))
         self.monitored = [s.var for s in specs.values() if s.monitor]
         sync_columns = [s.var for s in specs.values() if s.sync]
         self.synclog = (
@@ -186,6 +189,8 @@ class Recorder(ModeKeeping):
         self.losses = LossLedger()
         self._h = Health()
         self._m = MetaState(recorder_id, host_name(), boot_id())
+        #: snapshot mode (None when recording as pLogger does)
+        self._snap = None if snapshot is None else SnapshotState(snapshot, self.logstart)
         # Keep the attributes above at 30 or fewer (see _Health): new state goes in a group.
 
     def subscription_chunks(self) -> list[str]:
@@ -210,6 +215,7 @@ class Recorder(ModeKeeping):
             "clock": clock_state(self._clock()),
             "queue": self._h.queue,
             "commands": self.commands.recent(),
+            "snapshot": self.snapshot_status(),
             "wire": WIRE_VERSION,
             **self.modes_status(),
         }
@@ -290,6 +296,17 @@ class Recorder(ModeKeeping):
                 return
             var.last_logged = now
         verdict = var.verdict
+        snap = self._snap
+        if snap is not None:
+            # Snapshot mode: held in memory, written by a SNAPSHOT (recorder/snapshot_mode.py).
+            if verdict is not Verdict.IGNORE:
+                if self._modes.paused:
+                    stats.paused += 1  # paused: not even held
+                else:
+                    self._hold(snap, msg, now)
+            if is_command:
+                self._command(msg)
+            return
         session = self.session
         if session is None or self._modes.paused:
             if verdict is not Verdict.IGNORE or var.system:
@@ -299,7 +316,7 @@ class Recorder(ModeKeeping):
                     stats.lost += 1
                     self.losses.add(self._h.broken or "no-session", 1, now, name=name)
             if is_command:
-                self.commands.moos(msg)
+                self._command(msg)
             return
         stamp = msg.time
         # The skew rule (docs/compat.md): only a time that is not finite, before LOGSTART or
@@ -336,7 +353,7 @@ class Recorder(ModeKeeping):
             if self._unflushed_since is None:
                 self._unflushed_since = now
         if is_command:
-            self.commands.moos(msg)
+            self._command(msg)
 
     def unreadable(self, key: str) -> None:
         """Count a sample whose key names no MOOS variable (a malformed escape, docs/wire.md).
@@ -374,6 +391,10 @@ class Recorder(ModeKeeping):
                 stats.lost += count
                 self.losses.add("dropped", count, now, name=name)
         self._h.missed[source] = self._h.missed.get(source, 0) + count
+
+    def _vars_verdict(self, name: str) -> tuple[Verdict, bool]:
+        var = self._vars.get(name) or self._var(name)
+        return var.verdict, var.system
 
     def _line(self, session: SessionWriter, offset: float, name: str, msg: MoosMessage) -> str:
         value = msg.value
@@ -565,6 +586,7 @@ class Recorder(ModeKeeping):
             self._timers.status = now
             self.post(self.app_name.upper() + "_STATUS", self.status_text(now))
             self._end_lag_period()
+        self._snapshot_tick(now)
         self._session_tick(now)
         self._modes_tick(now)
         # Compressed streams close a frame only when flushed a second after the last one;
@@ -642,8 +664,15 @@ class Recorder(ModeKeeping):
             f"Throttled={s.throttled},Skewed={s.skewed},Garbled={s.garbled},Lost={s.lost},"
             f"Missed={s.missed},Paused={s.paused},"
             f"TypeClashes={s.type_clashes},WriteErrors={s.write_errors},"
-            f"Sessions={s.sessions},Directory={directory}"
+            f"Sessions={s.sessions},{self._snapshot_text()}Directory={directory}"
         )
+
+    def _snapshot_text(self) -> str:
+        snap = self._snap
+        if snap is None:
+            return ""
+        state = "writing" if snap.saving else "armed"
+        return f"Snapshot={state},Held={len(snap.ring)},Evicted={snap.ring.counts.evicted},"
 
     def flush_due(self, max_delay: float = 0.01) -> bool:
         """Return True when written lines have waited ``max_delay`` or more for a flush."""

@@ -217,7 +217,7 @@ class SessionKeeping:
         session = self.session
         return session.root if session is not None else None
 
-    def start(self) -> SessionWriter:
+    def start(self) -> SessionWriter | None:
         """Mark the sessions a dead recorder left open as cut, open the first session.
 
         Raises:
