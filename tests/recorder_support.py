@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import subprocess
 from collections.abc import Callable, Iterator
 from pathlib import Path
 
@@ -105,3 +106,26 @@ def rigs(tmp_path: Path) -> Iterator[Callable[..., Rig]]:
     yield make
     for rig in made:
         rig.close()
+
+
+def mount_tmpfs(where: Path, size: str, *options: str) -> None:
+    """Mount a tmpfs of ``size`` at ``where`` (root only: otherwise skip, and say so loudly)."""
+    where.mkdir(parents=True, exist_ok=True)
+    opts = ",".join([f"size={size}", *options])
+    done = subprocess.run(
+        ["mount", "-t", "tmpfs", "-o", opts, "tmpfs", str(where)], capture_output=True, check=False
+    )
+    if done.returncode != 0:
+        pytest.skip(
+            f"SKIPPED LOUDLY: mounting a tmpfs needs root ({done.stderr.decode().strip()}); "
+            "the RLIMIT_FSIZE full-disk test in test_faults.py covers the engine"
+        )
+
+
+@pytest.fixture
+def mounts() -> Iterator[list[Path]]:
+    """Mount points to unmount at the end (lazily, whatever is still using them)."""
+    made: list[Path] = []
+    yield made
+    for where in reversed(made):
+        subprocess.run(["umount", "-l", str(where)], capture_output=True, check=False)

@@ -34,6 +34,7 @@ from fleetlog.recorder.control import (
     clip,
     quote,
 )
+from fleetlog.recorder.disk import DiskGuard
 from fleetlog.recorder.losses import LossLedger
 from fleetlog.recorder.modes import ModeState
 from fleetlog.recorder.sessions import Background, Health, MetaState, inline
@@ -85,6 +86,10 @@ class _Timers:
 class _CommandLimits:
     """What LOG_REQUEST and COPY_FILE_REQUEST have used of their bounds (issue 10)."""
 
+    #: directories COPY_FILE_REQUEST may read from (resolved)
+    copy_dirs: tuple[Path, ...] = ()
+    #: asks the transport to deliver a variable added by LOG_REQUEST
+    subscribe: Callable[[str], None] | None = None
     #: variables added by LOG_REQUEST so far (at most MAX_LOG_REQUESTS)
     requested: int = 0
     #: copies made by COPY_FILE_REQUEST into the session they were made in
@@ -139,10 +144,8 @@ class Recorder(SnapshotTaking):
         self.vehicle = vehicle
         self._publish = publish
         self._clock = clock
-        self._subscribe = subscribe
         self._cwd = Path.cwd() if cwd is None else cwd
         self.mission_path = mission_path
-        self.copy_dirs = tuple(p.resolve() for p in copy_dirs)
         self.app_name = config.app_name
         self.stats = RecorderStats()
         #: LOGSTART: taken at construction, before Zenoh connects, as CMOOSApp does
@@ -180,7 +183,7 @@ class Recorder(SnapshotTaking):
         self.session: SessionWriter | None = None
         self._unflushed_since: float | None = None
         #: what LOG_REQUEST and COPY_FILE_REQUEST have used of their bounds
-        self._limits = _CommandLimits()
+        self._limits = _CommandLimits(tuple(p.resolve() for p in copy_dirs), subscribe)
         #: CMOOSApp's status fields: CPU and memory, what it posts, what it receives
         self._app = _AppStatus(started=self.logstart)
         #: split, pause, notes (recorder/modes.py)
@@ -191,6 +194,8 @@ class Recorder(SnapshotTaking):
         self._m = MetaState(recorder_id, host_name(), boot_id())
         #: snapshot mode (None when recording as pLogger does)
         self._snap = None if snapshot is None else SnapshotState(snapshot, self.logstart)
+        #: the disk guard (MinFreeDisk) and retention (KeepSessions, MaxLogSize)
+        self._disk = DiskGuard(config.disk)
         # Keep the attributes above at 30 or fewer (see _Health): new state goes in a group.
 
     def subscription_chunks(self) -> list[str]:
@@ -216,6 +221,7 @@ class Recorder(SnapshotTaking):
             "queue": self._h.queue,
             "commands": self.commands.recent(),
             "snapshot": self.snapshot_status(),
+            "disk": self.disk_status(),
             "wire": WIRE_VERSION,
             **self.modes_status(),
         }
@@ -436,9 +442,9 @@ class Recorder(SnapshotTaking):
             self.debug(f"refused dynamic log request {quote(spec.var)}: {why}")
             return Outcome.refused("log_request", why)
         did = f"now logging {spec.var}"
-        if self._subscribe is not None:
+        if self._limits.subscribe is not None:
             try:
-                self._subscribe(spec.var)
+                self._limits.subscribe(spec.var)
             except RecorderError as err:
                 # The transport's own bound (subscriptions): nothing was added.
                 self.debug(f"refused dynamic log request {quote(spec.var)}: {err}")
@@ -527,7 +533,7 @@ class Recorder(SnapshotTaking):
             resolved = source.resolve()
         except (OSError, RuntimeError, ValueError):
             return self._refuse_copy(requested, "cannot read it", unreadable=True)
-        home = next((d for d in self.copy_dirs if resolved.is_relative_to(d)), None)
+        home = next((d for d in self._limits.copy_dirs if resolved.is_relative_to(d)), None)
         if home is None:
             return self._refuse_copy(
                 requested, "outside the directories the recorder may copy from"
@@ -586,6 +592,7 @@ class Recorder(SnapshotTaking):
             self._timers.status = now
             self.post(self.app_name.upper() + "_STATUS", self.status_text(now))
             self._end_lag_period()
+        self._disk_tick(now)
         self._snapshot_tick(now)
         self._session_tick(now)
         self._modes_tick(now)

@@ -39,7 +39,7 @@ from fleetlog.storage.session import SessionLayout, SessionWriter
 from fleetlog.wire.control import Outcome
 from fleetlog.wire.session_meta import CLOSED, MAX_GAPS, OPEN, Gap, SessionMeta
 
-__all__ = ["Background", "Health", "MetaState", "SessionKeeping", "inline"]
+__all__ = ["MIN_FREE_BYTES", "Background", "Health", "MetaState", "SessionKeeping", "inline"]
 
 #: the session metadata is rewritten at most this often while counters change
 META_INTERVAL = 2.0
@@ -155,6 +155,9 @@ class SessionKeeping:
     def _identity(self, now: float) -> dict[str, Any]:
         """Return a new session's ``mission_id``, ``part`` (and notes, tags): see modes.py."""
         return {"mission_id": uuid.uuid4().hex, "part": 1}
+    def _resume_free(self) -> int:
+        """The free space a new session needs after a failure (the disk guard's)."""
+        return MIN_FREE_BYTES
 
     @property
     def broken(self) -> str | None:
@@ -536,7 +539,7 @@ class SessionKeeping:
         still fails waits twice as long before the next, up to 8 s.
         """
         self._h.retry_at = now + RETRY_FIRST
-        if not _writable(self.log_root):
+        if not _writable(self.log_root, self._resume_free()):
             return
         self.logstart = now
         try:
@@ -645,8 +648,8 @@ class SessionKeeping:
         return session
 
 
-def _writable(path: Path) -> bool:
-    """Return True unless ``path``'s file system is read-only or (nearly) full.
+def _writable(path: Path, need: int = MIN_FREE_BYTES) -> bool:
+    """Return True unless ``path``'s file system is read-only or has less than ``need`` free.
 
     A directory that no longer exists may be created again (or its fallback used): True.
     """
@@ -656,4 +659,4 @@ def _writable(path: Path) -> bool:
         return True
     if st.f_flag & os.ST_RDONLY:
         return False
-    return st.f_bavail * st.f_frsize >= MIN_FREE_BYTES
+    return st.f_bavail * st.f_frsize >= need

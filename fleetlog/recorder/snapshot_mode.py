@@ -28,7 +28,7 @@ from fleetlog.errors import StorageError
 from fleetlog.moos.keep_settings import SnapshotSettings, Trigger
 from fleetlog.moos.patterns import Verdict
 from fleetlog.moos.ylog import format_ylog_line
-from fleetlog.recorder.modes import ModeKeeping
+from fleetlog.recorder.disk import DiskKeeping
 from fleetlog.recorder.snapshot import Held, SnapshotRing
 from fleetlog.storage.metafile import mark_cut_sessions
 from fleetlog.storage.session import SessionWriter
@@ -84,8 +84,8 @@ class SnapshotState:
         self.triggers = {var: tuple(items) for var, items in by_var.items()}
 
 
-class SnapshotTaking(ModeKeeping):
-    """The snapshot half of the Recorder (a mixin over the modes and session halves)."""
+class SnapshotTaking(DiskKeeping):
+    """The snapshot half of the Recorder (over the disk, modes and session halves)."""
 
     _snap: SnapshotState | None
 
@@ -233,8 +233,19 @@ class SnapshotTaking(ModeKeeping):
         )
 
     def _snapshot_refused(self) -> str | None:
-        """Why no snapshot session can open now (the disk guard's, the Recorder's)."""
-        return None
+        """Why no snapshot session can open now (the disk guard has stopped writing)."""
+        return self._disk_refused()
+
+    def _stop_writing(self, now: float) -> None:
+        """The disk guard stops writing: a snapshot being written ends there (counted)."""
+        snap = self._snap
+        if snap is None:
+            super()._stop_writing(now)
+            return
+        if snap.saving and self.session is not None:
+            self._close_session()
+            self._h.broken = "low-disk"
+            self._snapshot_failed(snap, now)
 
     def _note_snapshot(self, snap: SnapshotState, why: str, span: float) -> None:
         meta = self._m.meta

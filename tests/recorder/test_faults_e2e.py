@@ -30,12 +30,15 @@ from typing import Any
 
 import pytest
 from helpers import Proc
+from recorder_support import mount_tmpfs, mounts
 
 from fleetlog.api import Vehicle
 from fleetlog.storage.readers import AlogReader
 from fleetlog.transport.queries import ZenohSession, start_query
 from fleetlog.transport.session import SessionOptions, open_session
 from fleetlog.wire.session_meta import META_NAME, SessionMeta
+
+__all__ = ["mounts"]  # the fixture, imported
 
 STATUS = "fleet/alpha/@fleetlog/status"
 MISSION = """\
@@ -116,28 +119,6 @@ def alogs(where: Path) -> list[Path]:
 def records(alog: Path) -> list[tuple[float, str, Any]]:
     with AlogReader(alog, errors="skip") as reader:
         return [(r.time, r.entry.key, r.entry.value) for r in reader.records()]
-
-
-def mount_tmpfs(where: Path, size: str, *options: str) -> None:
-    where.mkdir(parents=True, exist_ok=True)
-    opts = ",".join([f"size={size}", *options])
-    done = subprocess.run(
-        ["mount", "-t", "tmpfs", "-o", opts, "tmpfs", str(where)], capture_output=True, check=False
-    )
-    if done.returncode != 0:
-        pytest.skip(
-            f"SKIPPED LOUDLY: mounting a tmpfs needs root ({done.stderr.decode().strip()}); "
-            "the RLIMIT_FSIZE full-disk test in test_faults.py covers the engine"
-        )
-
-
-@pytest.fixture
-def mounts() -> Iterator[list[Path]]:
-    """Mount points to unmount at the end (lazily, whatever is still using them)."""
-    made: list[Path] = []
-    yield made
-    for where in reversed(made):
-        subprocess.run(["umount", "-l", str(where)], capture_output=True, check=False)
 
 
 # -------------------------------------------------------------------------------------------
