@@ -39,6 +39,8 @@ __all__ = [
     "parse_trigger",
     "read_disk_settings",
     "read_snapshot_settings",
+    "with_disk_options",
+    "with_snapshot_options",
 ]
 
 #: the ring's memory bound unless ``SnapshotMemory`` says otherwise
@@ -251,3 +253,89 @@ def read_disk_settings(block: ProcessBlock | None, path: str) -> DiskSettings:
     if (param := block.param("MaxLogSize")) is not None:
         size = _bytes(param, path, low=10**6)
     return DiskSettings(min_free, keep, size)
+
+
+def _option_seconds(text: str, option: str, *, low: float) -> float:
+    value = parse_duration(text, name=option)
+    if not low <= value <= MAX_SNAPSHOT_SECONDS:
+        msg = f"{option} {text.strip()[:80]!r} must be from {low:g} s to a day"
+        raise FormatError(msg)
+    return value
+
+
+def with_snapshot_options(
+    base: SnapshotSettings | None,
+    *,
+    seconds: str | None = None,
+    memory: str | None = None,
+    after: str | None = None,
+    triggers: list[str] | tuple[str, ...] = (),
+) -> SnapshotSettings | None:
+    """Return the mission's snapshot settings with command-line options over them.
+
+    ``--snapshot-seconds`` turns snapshot mode on (``0`` turns the mission's off); a
+    ``--snapshot-trigger`` adds to the mission's triggers.
+
+    Raises:
+        FormatError: a value that cannot be used; the message names the option.
+    """
+    if seconds is not None and parse_duration(seconds, name="--snapshot-seconds") == 0:
+        return None
+    if base is None and seconds is None:
+        if memory is not None or after is not None or triggers:
+            msg = "--snapshot-memory, --snapshot-after and --snapshot-trigger need snapshot mode"
+            raise FormatError(msg + " (--snapshot-seconds, or SnapshotSeconds in the mission)")
+        return None
+    window = base.seconds if base is not None else 0.0
+    if seconds is not None:
+        window = _option_seconds(seconds, "--snapshot-seconds", low=0.1)
+    size = base.memory if base is not None else DEFAULT_SNAPSHOT_MEMORY
+    if memory is not None:
+        size = parse_size(memory, name="--snapshot-memory")
+        if size < MIN_SNAPSHOT_MEMORY:
+            msg = f"--snapshot-memory {memory.strip()[:80]!r} must be at least 100kB"
+            raise FormatError(msg)
+    later = base.after if base is not None else 0.0
+    if after is not None:
+        later = _option_seconds(after, "--snapshot-after", low=0.0)
+    all_triggers = list(base.triggers) if base is not None else []
+    for text in triggers:
+        trigger = parse_trigger(text)
+        if trigger not in all_triggers:
+            all_triggers.append(trigger)
+    if len(all_triggers) > MAX_TRIGGERS:
+        msg = f"more than {MAX_TRIGGERS} snapshot triggers"
+        raise FormatError(msg)
+    return SnapshotSettings(window, size, later, tuple(all_triggers))
+
+
+def with_disk_options(
+    base: DiskSettings,
+    *,
+    min_free: str | None = None,
+    keep_sessions: int | None = None,
+    max_log_size: str | None = None,
+) -> DiskSettings:
+    """Return the mission's disk settings with command-line options over them.
+
+    ``--keep-sessions 0`` and ``--max-log-size 0`` turn the mission's bound off.
+
+    Raises:
+        FormatError: a value that cannot be used; the message names the option.
+    """
+    free = base.min_free if min_free is None else parse_size(min_free, name="--min-free-disk")
+    keep = base.keep_sessions
+    if keep_sessions is not None:
+        if not 0 <= keep_sessions <= _MAX_KEEP:
+            msg = f"--keep-sessions {keep_sessions} must be from 0 (no bound) to {_MAX_KEEP}"
+            raise FormatError(msg)
+        keep = keep_sessions or None
+    size = base.max_log_size
+    if max_log_size is not None:
+        size = parse_size(max_log_size, name="--max-log-size") or None
+        if size is not None and size < 10**6:
+            msg = (
+                f"--max-log-size {max_log_size.strip()[:80]!r} must be 0 (no bound) or at least 1MB"
+            )
+            raise FormatError(msg)
+    return DiskSettings(free, keep, size)

@@ -155,6 +155,7 @@ class SessionKeeping:
     def _identity(self, now: float) -> dict[str, Any]:
         """Return a new session's ``mission_id``, ``part`` (and notes, tags): see modes.py."""
         return {"mission_id": uuid.uuid4().hex, "part": 1}
+
     def _resume_free(self) -> int:
         """The free space a new session needs after a failure (the disk guard's)."""
         return MIN_FREE_BYTES
