@@ -31,6 +31,7 @@ __all__ = [
     "control_requests",
     "encodings",
     "hostile_text",
+    "keep_missions",
     "key_chunks",
     "message_times",
     "mission_texts",
@@ -41,6 +42,8 @@ __all__ = [
     "query_parameters",
     "selector_keys",
     "sizes_and_durations",
+    "snapshot_events",
+    "triggers",
 ]
 
 #: characters that break line formats, column splitting or escaping
@@ -435,6 +438,111 @@ def mission_texts(draw: st.DrawFn) -> str:
         at = draw(st.integers(0, len(lines)))
         lines.insert(at, draw(hostile_text))
     return "\n".join(lines) + draw(st.sampled_from(["\n", "", "\r\n"]))
+
+
+# --------------------------------------------------------------------------------------------
+# Snapshot mode and the disk's bounds (issue 17)
+
+_KEEP_SETTINGS = [
+    "SnapshotSeconds",
+    "SnapshotMemory",
+    "SnapshotAfter",
+    "SnapshotTrigger",
+    "MinFreeDisk",
+    "KeepSessions",
+    "MaxLogSize",
+    "snapshotseconds",
+]
+_KEEP_VALUES = [
+    "30",
+    "0",
+    "0.05",
+    "2min",
+    "1.5h",
+    "1e9",
+    "1e400",
+    "nan",
+    "inf",
+    "-1",
+    "256MB",
+    "2 GiB",
+    "100kB",
+    "10 potatoes",
+    "1.5.3kB",
+    "99999999999999999999TB",
+    "ALARM == 1",
+    "A==",
+    "== 1",
+    "MODE == FAULT",
+    "X == nan",
+    "X == 1e999",
+    "X == -",
+    "X == a == b",
+    "\u00b2",
+    "\u0663",
+    "0x10",
+    "",
+]
+#: trigger texts: well-formed ones with hostile halves, and garbage
+triggers = st.one_of(
+    st.sampled_from(_KEEP_VALUES),
+    st.tuples(
+        st.sampled_from(["ALARM", "A_B", "x.y", "", " "]) | hostile_text,
+        st.sampled_from(["==", "= =", "===", "=", ""]),
+        st.sampled_from(["1", "FAULT", "-2.5", "1e3", " ", "nan"]) | hostile_text,
+    ).map("".join),
+)
+
+
+@st.composite
+def keep_missions(draw: st.DrawFn) -> str:
+    """Missions whose pLogger block sets snapshot and disk settings to hostile values."""
+    lines = ["ProcessConfig = pLogger", "{"]
+    if draw(st.booleans()):
+        lines.append("  SnapshotSeconds = " + draw(st.sampled_from(_KEEP_VALUES[:6])))
+    for _ in range(draw(st.integers(1, 6))):
+        name = draw(st.sampled_from(_KEEP_SETTINGS))
+        value = draw(st.sampled_from(_KEEP_VALUES) | hostile_text | triggers)
+        lines.append(f"  {name} = {value}")
+    lines.append("}")
+    return "\n".join(lines) + "\n"
+
+
+_EVENT_NAMES = ["A", "ALARM", "PLOGGER_CMD", "LOGGER_RESTART", "MOOS_DEBUG"]
+
+
+@st.composite
+def snapshot_events(draw: st.DrawFn) -> list[tuple[str, Any, Any]]:
+    """What a snapshot-mode recorder meets: samples with hostile values and times, trigger
+    writes, PLOGGER_CMD (SNAPSHOT among garbage), control requests, and time passing."""
+    events: list[tuple[str, Any, Any]] = []
+    for _ in range(draw(st.integers(1, 30))):
+        kind = draw(st.sampled_from(["sample", "sample", "alarm", "cmd", "control", "tick"]))
+        if kind == "sample":
+            name = draw(st.sampled_from(_EVENT_NAMES) | moos_names)
+            value = draw(
+                st.floats() | hostile_text | st.binary(max_size=64) | st.text(max_size=3000)
+            )
+            events.append((kind, name, (value, draw(message_times))))
+        elif kind == "alarm":
+            value = draw(
+                st.sampled_from([0.0, 1.0, 1.0000001, "1", " 1 "]) | st.floats() | hostile_text
+            )
+            events.append((kind, "ALARM", value))
+        elif kind == "cmd":
+            value = draw(
+                st.sampled_from(["SNAPSHOT", "snapshot", " SNAP SHOT ", "SNAPSHOT="])
+                | plogger_cmds()
+            )
+            events.append((kind, "PLOGGER_CMD", value))
+        elif kind == "control":
+            extra = draw(
+                st.sampled_from(["", ',"source":"x\\n0 FORGED y 1"', ',"x":1', ',"time":1e999'])
+            )
+            events.append((kind, "", ('{"cmd":"snapshot"' + extra + "}").encode()))
+        else:
+            events.append((kind, "", draw(st.floats(0.0, 3.0))))
+    return events
 
 
 # --------------------------------------------------------------------------------------------

@@ -300,7 +300,11 @@ def with_snapshot_options(
         later = _option_seconds(after, "--snapshot-after", low=0.0)
     all_triggers = list(base.triggers) if base is not None else []
     for text in triggers:
-        trigger = parse_trigger(text)
+        try:
+            trigger = parse_trigger(text)
+        except FormatError as err:
+            msg = f"--snapshot-trigger: {err.reason}"
+            raise FormatError(msg) from None
         if trigger not in all_triggers:
             all_triggers.append(trigger)
     if len(all_triggers) > MAX_TRIGGERS:
