@@ -134,6 +134,12 @@ class SnapshotTaking(DiskKeeping):
             while self.session is snap.session and self._pump(snap, SLICE):
                 pass
             self._end_snapshot(snap)
+        if snap is not None and len(snap.ring):
+            # Held, never asked for: not lost, but not silent either.
+            self.debug(
+                f"snapshot mode: stopping with {len(snap.ring)} samples held in memory "
+                "and not written (no SNAPSHOT asked for them)"
+            )
         super().stop()
 
     # -- the hot path
