@@ -38,7 +38,7 @@ from fleetlog.wire.message import MoosMessage
 if TYPE_CHECKING:
     from fleetlog.recorder.control import CommandHandler
 
-__all__ = ["SKEW_TOLERANCE", "SLICE", "SnapshotState", "SnapshotTaking"]
+__all__ = ["MIN_INTERVAL", "SKEW_TOLERANCE", "SLICE", "SnapshotState", "SnapshotTaking"]
 
 #: pLogger's (MOOSMsg's) skew tolerance, seconds
 SKEW_TOLERANCE = 5.0
@@ -46,6 +46,9 @@ SKEW_TOLERANCE = 5.0
 SLICE = 2000
 #: the gap reason of samples evicted from the ring before a snapshot could write them
 EVICTED = "snapshot-memory"
+#: a new snapshot session starts at most this often (a flood of SNAPSHOTs or a trigger
+#: toggling fast must not write the ring again and again); one meanwhile is refused
+MIN_INTERVAL = 1.0
 #: what a snapshot's reason keeps (it names a peer, which may say anything)
 _WHY = 160
 
@@ -70,6 +73,7 @@ class SnapshotState:
     session: SessionWriter | None = None
     #: what SNAPSHOT did: sessions written, triggers taken, samples written, lost to memory
     snapshots: int = 0
+    started: float = -1e300
     triggered: int = 0
     written: int = 0
     lost: int = 0
@@ -201,6 +205,9 @@ class SnapshotTaking(DiskKeeping):
                 session=self.session.root,
             )
         refused = self._snapshot_refused()
+        if refused is None and now - snap.started < MIN_INTERVAL:
+            ago = now - snap.started
+            refused = f"at most one snapshot session a second (the last started {ago:.2f} s ago)"
         if refused is not None:
             self.debug(f"SNAPSHOT ({why}) refused: {refused}")
             return Outcome.refused("snapshot", refused)
@@ -219,6 +226,7 @@ class SnapshotTaking(DiskKeeping):
         snap.saving, snap.cursor, snap.until, snap.last = True, first, now + after, why
         ring.pin = first
         snap.snapshots += 1
+        snap.started = now
         span = now - (ring.oldest() or now)
         self._note_snapshot(snap, why, span)
         for held in older:

@@ -267,3 +267,21 @@ def test_settings_are_read_with_units() -> None:
     assert default.disk == DiskSettings()
     assert parse_trigger("X == 1e3").value == 1000.0
     assert parse_trigger("X == 1.2.3").value == "1.2.3"
+
+
+def test_a_flood_of_snapshots_starts_at_most_one_session_a_second(
+    rigs: Callable[..., Rig],
+) -> None:
+    rig = rigs("File = R\nPath = logs\nLog = A @ 0\nSnapshotSeconds = 5")
+    rig.rec.start()
+    rig.send("A", 1.0, at=1.0)
+    outcomes = []
+    for k in range(40):  # 40 SNAPSHOTs in 2 s, each written and closed at once (no after)
+        rig.send("PLOGGER_CMD", "SNAPSHOT", at=1.0 + k * 0.05)
+        finish(rig, 1.0 + k * 0.05)
+        outcomes.append(rig.rec.status()["commands"][-1])
+    assert len(sessions(rig)) == 2
+    refused = [o for o in outcomes if not o["ok"]]
+    assert len(refused) == 38
+    assert "at most one snapshot session a second" in refused[0]["why"]
+    assert rig.rec.stats.refused_commands == 38
