@@ -25,6 +25,15 @@ from fleetlog.cli.options import (
     checked_vehicle,
     session_options,
 )
+from fleetlog.cli.record_options import (
+    KeepSessionsOption,
+    MaxLogSizeOption,
+    MinFreeDiskOption,
+    SnapshotAfterOption,
+    SnapshotMemoryOption,
+    SnapshotSecondsOption,
+    SnapshotTriggerOption,
+)
 from fleetlog.cli.settings import settings
 from fleetlog.errors import FormatError, MissionError, UsageError
 from fleetlog.moos.keep_settings import with_disk_options, with_snapshot_options
@@ -331,83 +340,13 @@ def record(
             "--no-serve", help="Do not serve the logs to shore (fleetlog fetch/query/sessions)."
         ),
     ] = False,
-    snapshot_seconds: Annotated[
-        str | None,
-        typer.Option(
-            "--snapshot-seconds",
-            metavar="TIME",
-            help="Snapshot mode: keep the last TIME (30, 2min) in memory and write nothing"
-            " until a SNAPSHOT (PLOGGER_CMD, control, a trigger); 0: off"
-            " [default: the mission's SnapshotSeconds].",
-            show_default=False,
-            rich_help_panel="Snapshot and disk",
-        ),
-    ] = None,
-    snapshot_memory: Annotated[
-        str | None,
-        typer.Option(
-            "--snapshot-memory",
-            metavar="SIZE",
-            help="The most memory the snapshot ring holds (256MB); past it the oldest samples"
-            " are evicted, counted [default: SnapshotMemory, else 256MB].",
-            show_default=False,
-            rich_help_panel="Snapshot and disk",
-        ),
-    ] = None,
-    snapshot_after: Annotated[
-        str | None,
-        typer.Option(
-            "--snapshot-after",
-            metavar="TIME",
-            help="A snapshot records on for TIME past its trigger [default: SnapshotAfter,"
-            " else 0].",
-            show_default=False,
-            rich_help_panel="Snapshot and disk",
-        ),
-    ] = None,
-    snapshot_trigger: Annotated[
-        list[str] | None,
-        typer.Option(
-            "--snapshot-trigger",
-            metavar="'VAR == VALUE'",
-            help="A SNAPSHOT when VAR changes to VALUE (repeatable; adds to the mission's).",
-            rich_help_panel="Snapshot and disk",
-        ),
-    ] = None,
-    min_free_disk: Annotated[
-        str | None,
-        typer.Option(
-            "--min-free-disk",
-            metavar="SIZE",
-            help="Stop writing while the disk has less than SIZE free (2GB; 0: only a full"
-            " disk stops it); resumes by itself [default: MinFreeDisk, else 64MB].",
-            show_default=False,
-            rich_help_panel="Snapshot and disk",
-        ),
-    ] = None,
-    keep_sessions: Annotated[
-        int | None,
-        typer.Option(
-            "--keep-sessions",
-            metavar="N",
-            help="Keep at most N sessions: acknowledged ones are removed first, then the"
-            " oldest; never the current one or one being fetched (0: no bound)"
-            " [default: KeepSessions, else no bound].",
-            show_default=False,
-            rich_help_panel="Snapshot and disk",
-        ),
-    ] = None,
-    max_log_size: Annotated[
-        str | None,
-        typer.Option(
-            "--max-log-size",
-            metavar="SIZE",
-            help="Keep at most SIZE of sessions (50GB), removed as --keep-sessions says"
-            " (0: no bound) [default: MaxLogSize, else no bound].",
-            show_default=False,
-            rich_help_panel="Snapshot and disk",
-        ),
-    ] = None,
+    snapshot_seconds: SnapshotSecondsOption = None,
+    snapshot_memory: SnapshotMemoryOption = None,
+    snapshot_after: SnapshotAfterOption = None,
+    snapshot_trigger: SnapshotTriggerOption = None,
+    min_free_disk: MinFreeDiskOption = None,
+    keep_sessions: KeepSessionsOption = None,
+    max_log_size: MaxLogSizeOption = None,
     root: Root = "fleet",
     mode: Mode = None,
     connect: Connect = None,
