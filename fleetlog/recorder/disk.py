@@ -46,7 +46,8 @@ __all__ = [
     "free_bytes",
 ]
 
-#: how often the free space is checked
+#: how often the free space is checked; at every tick of the drain loop once it is less
+#: than twice the resume level (statvfs costs a few µs; a fast writer must not outrun it)
 CHECK_INTERVAL = 1.0
 #: retention runs at least this often while a bound is set (and after every new session)
 RETENTION_INTERVAL = 60.0
@@ -145,6 +146,7 @@ class DiskGuard:
     stops: int = 0
     #: retention: when it runs next; a pass is running; one more was asked meanwhile
     retain_at: float = 0.0
+    soon_at: float = 0.0
     running: bool = False
     again: bool = False
     #: what retention did: sessions removed, bytes freed, the last pass's problems
@@ -192,10 +194,12 @@ class DiskKeeping(ModeKeeping):
         guard = self._disk
         if now < guard.check_at:
             return
-        guard.check_at = now + CHECK_INTERVAL
         free = guard.free = free_bytes(self.log_root)
         low = guard.settings.min_free
-        if free is not None and low and free < guard.resume:
+        near = free is not None and low and free < 2 * guard.resume
+        guard.check_at = now if near else now + CHECK_INTERVAL
+        if free is not None and low and free < guard.resume and now >= guard.soon_at:
+            guard.soon_at = now + CHECK_INTERVAL  # a pass a second at most while low
             self.retain(now, soon=True)  # acknowledged sessions make room, if any
         if free is not None and low and free < low:
             if guard.stopped is None:

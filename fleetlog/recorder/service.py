@@ -337,7 +337,8 @@ class RecorderService:
 
         def answer(query: IncomingQuery) -> None:
             body = recorder.status()
-            body["disk"] = disk_space(recorder.log_root)  # what `fleetlog status` shows
+            # What `fleetlog status` shows (free, total, now) over the guard's own figures.
+            body["disk"] = {**body["disk"], **(disk_space(recorder.log_root) or {})}
             try:
                 query.reply(key, json.dumps(body).encode(), encoding="application/json")
             except TransportError:

@@ -1,4 +1,4 @@
-"""Snapshot mode in a real ``fleetlog record`` on loopback Zenoh, with real files.
+"""Snapshot mode and the disk guard in a real ``fleetlog record`` on loopback Zenoh, real files.
 
 A recorder subprocess in snapshot mode listens on a fresh loopback endpoint; the test
 publishes a counter at a steady rate as a MOOS app would, asks for a SNAPSHOT through the
@@ -10,6 +10,7 @@ nothing from before; then a trigger variable fires once per change to its value.
 from __future__ import annotations
 
 import json
+import subprocess
 import time
 from collections.abc import Callable, Iterator
 from pathlib import Path
@@ -18,8 +19,10 @@ from typing import Any
 import pytest
 from alog_oracle import iter_entries
 from helpers import Proc
+from recorder_support import mount_tmpfs
 
 from fleetlog.api import Vehicle
+from fleetlog.storage.download import sha256_file
 from fleetlog.transport.queries import ZenohSession, start_query
 from fleetlog.transport.session import SessionOptions, open_session
 from fleetlog.wire.session_meta import META_NAME, SessionMeta
@@ -146,3 +149,55 @@ def test_a_snapshot_over_zenoh_holds_the_window_and_after_and_triggers_fire_once
             assert body["snapshot"]["evicted"] == 0
     finally:
         rec.close()
+
+
+def test_the_disk_guard_stops_a_real_recorder_and_an_ack_lets_it_resume(
+    tmp_path: Path, endpoint: str, cli_env: dict[str, str], zenoh_session: ZenohSession
+) -> None:
+    where = tmp_path / "disk"
+    mount_tmpfs(where, "6m")
+    try:
+        rec = Proc(
+            [
+                *("record", "--vehicle", "alpha", "--min-free-disk", "2MB"),
+                *("-l", endpoint, "--no-multicast-scouting", "--no-serve"),
+            ],
+            where,
+            cli_env,
+        )
+        try:
+            rec.wait_for("recording")
+            (first,) = session_dirs(where)
+            options = SessionOptions(connect=(endpoint,), multicast_scouting=False)
+            with Vehicle("alpha", source="iTest", options=options) as v:
+                assert v.wait_for_subscriber("BIG", timeout=10.0)
+                deadline = time.monotonic() + 60.0
+                while control(zenoh_session, "status", None)["disk"]["stopped"] is None:
+                    assert time.monotonic() < deadline, "the guard never stopped writing"
+                    # about 1 MB/s: the guard checks every 20 ms near the bound, so a 2 MB
+                    # margin holds what a tick writes (a real MinFreeDisk is GBs)
+                    for _ in range(10):
+                        v.publish("BIG", "x" * 10_000)
+                    assert v.confirm()
+                    time.sleep(0.1)
+                status = control(zenoh_session, "status", None)
+                assert status["problem"] == "low-disk"
+                # stopped before the disk was full
+                assert status["write_errors"] == 0, status["last_error"]
+                assert "below MinFreeDisk 2.0 MB" in status["disk"]["stopped"]
+                eventually(lambda: meta_of(first).state == "closed", timeout=15.0)
+                # the shore acknowledges the session: the guard removes it, writing resumes
+                files = {p.name: sha256_file(p) for p in first.iterdir() if p.is_file()}
+                reply = control(
+                    zenoh_session, "control", {"cmd": "ack", "session": first.name, "files": files}
+                )
+                assert reply["ok"], reply
+                eventually(lambda: not first.exists(), timeout=20.0)
+                eventually(lambda: len(session_dirs(where)) == 1, timeout=20.0)
+                body = control(zenoh_session, "status", None)
+                assert body["disk"]["removed"] == 1
+                eventually(lambda: control(zenoh_session, "status", None)["writing"], 20.0)
+        finally:
+            rec.close()
+    finally:
+        subprocess.run(["umount", "-l", str(where)], capture_output=True, check=False)
