@@ -256,6 +256,7 @@ def test_control_refusals_are_reported_on_moos_debug(rig: Rig) -> None:
     replies: list[Outcome] = []
     rig.posted.clear()
     rig.rec.commands.submit(ControlRequest("snapshot", text='{"cmd": "snapshot"}'), replies.append)
+    rig.rec.commands.run_queued()  # snapshot runs in the recording thread
     (reply,) = replies
     assert not reply.ok
     assert any("snapshot" in text and "refused" in text for text in rig.debugs())
