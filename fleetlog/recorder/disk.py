@@ -24,7 +24,7 @@ import threading
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from fleetlog.errors import StorageError
 from fleetlog.moos.keep_settings import DiskSettings
@@ -33,6 +33,9 @@ from fleetlog.recorder.sessions import MIN_FREE_BYTES
 from fleetlog.storage import retention
 from fleetlog.storage.retention import RetentionView, StoredSession
 from fleetlog.storage.session import SessionWriter
+
+if TYPE_CHECKING:
+    from fleetlog.recorder.control import CommandHandler
 
 __all__ = [
     "CHECK_INTERVAL",
@@ -180,6 +183,7 @@ class DiskKeeping(ModeKeeping):
     """The disk half of the Recorder: the free-space guard and retention (a mixin)."""
 
     _disk: DiskGuard
+    commands: CommandHandler
 
     def _resume_free(self) -> int:
         """The free space writing needs to resume after a stop."""
@@ -276,9 +280,14 @@ class DiskKeeping(ModeKeeping):
     def _retain_once(self) -> None:
         """One pass: survey, plan, delete (retention's thread)."""
         guard = self._disk
+        pruner = self.commands.pruner  # the log server's digests and fetches, as prune uses
         try:
             result = retention.run(
-                self.log_root, guard.policies(), current=self.current_session_name
+                self.log_root,
+                guard.policies(),
+                current=self.current_session_name,
+                fetching=pruner.fetching,
+                digest=pruner.digest,
             )
         except StorageError as err:
             guard.problems = [str(err)]
