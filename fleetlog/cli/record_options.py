@@ -70,7 +70,7 @@ MinFreeDiskOption = Annotated[
         "--min-free-disk",
         metavar="SIZE",
         help="Stop writing while the disk has less than SIZE free (2GB; 0: only a full"
-        " disk stops it); resumes by itself [default: MinFreeDisk, else 64MB].",
+        " disk stops it); resumes by itself [default: MinFreeDisk, else 0].",
         show_default=False,
         rich_help_panel=_PANEL,
     ),

@@ -52,8 +52,9 @@ MIN_SNAPSHOT_MEMORY = 10**5
 MAX_SNAPSHOT_SECONDS = 86400.0
 #: trigger lines a block may hold
 MAX_TRIGGERS = 16
-#: ``MinFreeDisk`` unless the block says otherwise: the operating system keeps room to work
-DEFAULT_MIN_FREE_DISK = 64 * 10**6
+#: ``MinFreeDisk`` unless the block says otherwise: off, as pLogger writes until the disk is
+#: full (the recorder survives that, docs/reliability.md §1); a vehicle should set it
+DEFAULT_MIN_FREE_DISK = 0
 #: the most sessions ``KeepSessions`` may name (a typo guard)
 _MAX_KEEP = 10**6
 _MAX_TRIGGER_TEXT = 512

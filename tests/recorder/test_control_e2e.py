@@ -141,7 +141,7 @@ def test_control_commands_and_the_ring_over_zenoh(
     snapshot = ask(zenoh_session, {"cmd": "snapshot"})
     assert isinstance(snapshot, dict)
     assert (snapshot["ok"], snapshot["did"]) == (False, "")
-    assert "not supported yet" in snapshot["why"]
+    assert "not in snapshot mode" in snapshot["why"]
     bad = ask(zenoh_session, {"cmd": "frobnicate"})
     assert isinstance(bad, str)
     assert bad.startswith("unknown command 'frobnicate'")

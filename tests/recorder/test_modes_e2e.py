@@ -178,7 +178,7 @@ def test_the_shore_commands_the_recorder_and_sees_its_notes(
     assert "paused_samples" in status.stdout
     refused = ctl("snapshot")
     assert refused.returncode == 1
-    assert "not supported yet" in refused.stdout
+    assert "not in snapshot mode" in refused.stdout
     assert "1 of 1 recorder(s) refused" in refused.stderr
     bad = ctl("note", "nocolon")
     assert bad.returncode == 1
