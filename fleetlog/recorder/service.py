@@ -19,6 +19,7 @@ import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 from fleetlog.errors import FleetlogError, FormatError, RecorderError, TransportError
 from fleetlog.moos.mission import LoggerConfig
@@ -306,7 +307,11 @@ class RecorderService:
                 publisher.close()
                 session.close()
                 self._session = None
-        return RecorderStatsView(recorder.stats.as_dict() if recorder else {}, errors)
+        return RecorderStatsView(
+            recorder.stats.as_dict() if recorder else {},
+            errors,
+            recorder.snapshot_status() if recorder else None,
+        )
 
     def _refuse_a_second_recorder(self, session: ZenohSession) -> None:
         """Refuse to start when a recorder of the same vehicle already answers.
@@ -405,13 +410,27 @@ class RecorderStatsView:
 
     stats: dict[str, int | str]
     publish_errors: list[str]
+    #: snapshot mode's state at the end (None outside snapshot mode)
+    snapshot: dict[str, Any] | None = None
 
     def summary(self) -> str:
-        """One line for the terminal."""
+        """One line for the terminal: every sample received is accounted for in it."""
         s = self.stats
-        return (
+        line = (
             f"received {s.get('received', 0)}, logged {s.get('logged', 0)}, "
             f"excluded {s.get('excluded', 0)}, throttled {s.get('throttled', 0)}, "
             f"skewed {s.get('skewed', 0)}, garbled {s.get('garbled', 0)}, "
             f"lost {s.get('lost', 0)} in {s.get('sessions', 0)} session(s)"
         )
+        # Samples deliberately not written are not lost, but the operator must see them.
+        if s.get("paused"):
+            line += f"; paused {s['paused']} (not written while paused)"
+        snap = self.snapshot
+        if snap is not None:
+            line += (
+                f"; snapshot mode: {snap.get('snapshots', 0)} snapshot(s), "
+                f"{snap.get('samples', 0)} held in memory at the end and "
+                f"{snap.get('unsaved', 0)} past the window never written (no SNAPSHOT), "
+                f"{snap.get('evicted', 0)} evicted by the memory bound"
+            )
+        return line

@@ -153,6 +153,8 @@ def test_pause_and_resume_over_the_control_service(
     assert meta is not None
     assert meta.counters["paused"] >= 200
     assert meta.counters["lost"] == 0
+    summary = rec.wait_for("stopped:")
+    assert f"paused {meta.counters['paused']} (not written while paused)" in summary, summary
 
 
 def test_the_shore_commands_the_recorder_and_sees_its_notes(

@@ -147,6 +147,11 @@ def test_a_snapshot_over_zenoh_holds_the_window_and_after_and_triggers_fire_once
             assert body["snapshot"]["triggered"] == 2
             assert body["snapshot"]["triggers"] == ["ALARM == 1"]
             assert body["snapshot"]["evicted"] == 0
+        # what was received and never written is in the stop summary, not only in status
+        assert rec.stop(timeout=30.0) == 0
+        summary = rec.wait_for("stopped:")
+        assert "snapshot mode: 3 snapshot(s)" in summary, summary
+        assert "never written (no SNAPSHOT)" in summary, summary
     finally:
         rec.close()
 
