@@ -77,6 +77,12 @@ def test_cut_restore_degrade(tmp_path: Path, cli_env: dict[str, str], profile: P
         linked.link.set("back", rate=1_000_000, queue=0.1)
         probe = linked.spawn(linked.shore_ns, "shore", "probe", python_cmd(RTT_PROBE), tmp_path)
         linked.wait_output("probe", "ready", timeout=60)
+        # The probe's first command also opens its routes over the degraded link (seconds,
+        # under load): time commands from its second answer on, not from its cold start.
+        deadline = time.monotonic() + 60
+        while len(round_trips(linked.output("probe"), 0.0, float("inf"))) < 2:
+            assert time.monotonic() < deadline, linked.output("probe")
+            time.sleep(0.1)
         assert linked.big is not None
         session, original = linked.big
         out = tmp_path / "fetched"
