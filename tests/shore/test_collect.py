@@ -24,7 +24,7 @@ from collect_support import Fleet, Vehicle, namespaces_unavailable
 from query_support import same_tree
 
 from fleetlog.storage.archive import VehicleRecord, load_record
-from fleetlog.wire.session_meta import META_NAME, SessionMeta
+from fleetlog.wire.session_meta import META_NAME, OPEN, SessionMeta
 
 PRUNE = """
 import json, sys
@@ -78,8 +78,17 @@ def state_on_shore(archive: Path, vehicle: str, session: str) -> str | None:
 def restart(fleet: Fleet, vehicle: Vehicle) -> str:
     """LOGGER_RESTART from the shore; return the session it closed."""
     before = vehicle.sessions()[-1].name
-    done = fleet.run("poke", "-v", vehicle.name, "LOGGER_RESTART=true", "--wait", "10")
+    done = fleet.run("poke", "-v", vehicle.name, "LOGGER_RESTART=true", "--wait", "30")
     assert done.returncode == 0, done.stderr
+    # poke returns once the recorder has the command; under load it may say so before the
+    # restart's outcome (a warning, exit 0): the session must really be closed and the next
+    # one open before the test counts on it (CI once saw the "closed" session still open).
+    until(
+        lambda: (
+            vehicle.sessions()[-1].name != before and meta_state(vehicle.log_root / before) != OPEN
+        ),
+        f"{vehicle.name}'s restart to close {before}",
+    )
     return before
 
 
@@ -210,7 +219,9 @@ def test_prune_after_collect_keeps_the_current_session(
         record = record_of(archive, "alpha")
         for name in closed:
             entry = record.sessions[name]
-            assert (entry.state, entry.on_vehicle) == ("complete", False)
+            assert (entry.state, entry.on_vehicle) == ("complete", False), (
+                f"{name}: {entry}\ncollect said:\n{done.stderr}"
+            )
             assert entry.acked is not None
             assert entry.pruned is not None
             assert (archive / "alpha" / name / f"{name}.alog").is_file()
