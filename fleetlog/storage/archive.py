@@ -30,6 +30,7 @@ from pathlib import Path
 from typing import Any
 
 from fleetlog.errors import FormatError, StorageError
+from fleetlog.storage.files import write_atomic
 from fleetlog.wire.query import check_component
 
 __all__ = [
@@ -294,25 +295,7 @@ def save_record(directory: Path, record: VehicleRecord) -> None:
     Raises:
         StorageError: it cannot be written.
     """
-    final = directory / ARCHIVE_RECORD
-    tmp = directory / (ARCHIVE_RECORD + ".tmp")
-    data = record.to_bytes()
-    try:
-        directory.mkdir(parents=True, exist_ok=True)
-        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_TRUNC | os.O_CLOEXEC, 0o644)
-        try:
-            view = memoryview(data)
-            while view:
-                view = view[os.write(fd, view) :]
-            os.fsync(fd)
-        finally:
-            os.close(fd)
-        os.replace(tmp, final)
-    except OSError as err:
-        with contextlib.suppress(OSError):
-            tmp.unlink()
-        msg = f"cannot write {final}: {err.strerror or err}"
-        raise StorageError(msg) from err
+    write_atomic(directory / ARCHIVE_RECORD, record.to_bytes())
 
 
 def vehicle_dirs(archive: Path) -> list[Path]:

@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import IO, Any
 
 from fleetlog.errors import StorageError
+from fleetlog.storage.files import fsync_dir
 
 __all__ = ["PartFile", "sha256_file"]
 
@@ -278,7 +279,7 @@ class PartFile:
             self._file = None
             os.replace(self.part, self.final)
             self.state_path.unlink(missing_ok=True)
-            _fsync_dir(self.final.parent)
+            fsync_dir(self.final.parent)
         except OSError as err:
             msg = _why("finish", self.final, err)
             raise StorageError(msg) from err
@@ -302,17 +303,3 @@ class PartFile:
             self._file = None
         self.part.unlink(missing_ok=True)
         self.state_path.unlink(missing_ok=True)
-
-
-def _fsync_dir(directory: Path) -> None:
-    # The rename is durable only once the directory entry is on disk.
-    try:
-        fd = os.open(directory, os.O_RDONLY)
-    except OSError:
-        return
-    try:
-        os.fsync(fd)
-    except OSError:
-        pass
-    finally:
-        os.close(fd)

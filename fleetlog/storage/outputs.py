@@ -18,21 +18,13 @@ from pathlib import Path
 from typing import BinaryIO
 
 from fleetlog.errors import StorageError
+from fleetlog.storage.files import fsync_dir
 
 __all__ = ["atomic_output", "staged_directory"]
 
 
 def _why(err: OSError) -> str:
     return err.strerror or str(err)
-
-
-def _fsync_dir(path: Path) -> None:
-    with contextlib.suppress(OSError):
-        fd = os.open(path, os.O_RDONLY)
-        try:
-            os.fsync(fd)
-        finally:
-            os.close(fd)
 
 
 @contextlib.contextmanager
@@ -59,7 +51,7 @@ def atomic_output(path: Path, *, overwrite: bool = True) -> Iterator[BinaryIO]:
             out.flush()
             os.fsync(out.fileno())
         os.replace(tmp, path)
-        _fsync_dir(path.parent)
+        fsync_dir(path.parent)
     except OSError as err:
         with contextlib.suppress(OSError):
             tmp.unlink()
@@ -102,7 +94,7 @@ def staged_directory(final: Path, staging: Path) -> Iterator[Path]:
                 os.close(fd)
         final.parent.mkdir(parents=True, exist_ok=True)
         os.rename(staging, final)
-        _fsync_dir(final.parent)
+        fsync_dir(final.parent)
     except OSError as err:
         shutil.rmtree(staging, ignore_errors=True)
         msg = f"cannot write {final}: {_why(err)}"
