@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import datetime as dt
+import math
 import sys
 from collections.abc import Collection, Mapping, Sequence
 from typing import Any
@@ -20,6 +21,7 @@ __all__ = [
     "human_duration",
     "human_size",
     "human_time",
+    "part_span",
     "plain",
     "sessions_table",
 ]
@@ -59,9 +61,13 @@ def human_size(size: int) -> str:
     return f"{value:.1f} TiB"  # pragma: no cover - the loop returns
 
 
+#: a duration longer than this is not a log's (a hostile or garbled reply): shown as ``-``
+_CENTURY = 100 * 365.25 * 86400.0
+
+
 def human_duration(seconds: float | None) -> str:
-    """``3725.2`` → ``1:02:05``; None → ``-``."""
-    if seconds is None:
+    """``3725.2`` → ``1:02:05``; None, NaN or beyond a century → ``-``."""
+    if seconds is None or math.isnan(seconds) or seconds >= _CENTURY:
         return "-"
     total = round(max(seconds, 0.0))
     hours, rest = divmod(total, 3600)
@@ -124,11 +130,12 @@ def sessions_table(sessions: list[SessionInfo], latest: str | None) -> Table:
     for column in columns:
         table.add_column(column, no_wrap=column != "NOTES")
     for info in sessions:
+        start, duration = part_span(info)
         row: list[str | Text] = [
             "*" if info.name == latest else "",
             plain(info.name),
-            human_time(info.start),
-            human_duration(info.duration),
+            human_time(start),
+            human_duration(duration),
             "-" if info.variables is None else str(info.variables),
             str(len(info.files)),
             human_size(info.size),
@@ -140,6 +147,20 @@ def sessions_table(sessions: list[SessionInfo], latest: str | None) -> Table:
             row.append(plain(notes_text(info.notes, info.tags)))
         table.add_row(*row)
     return table
+
+
+def part_span(info: SessionInfo) -> tuple[float | None, float | None]:
+    """When a session began and how long it lasted, as a table shows them.
+
+    A split's later part keeps its mission's LOGSTART (so its times go on from the part
+    before); shown as such, every part would seem to start with the mission and last longer
+    than the last. A later part is shown from when it opened, for as long as it ran.
+    """
+    start, duration, opened = info.start, info.duration, info.opened
+    if (info.part or 1) > 1 and opened is not None and start is not None:
+        end = None if duration is None else start + duration
+        return opened, None if end is None else max(0.0, end - opened)
+    return start, duration
 
 
 def mission_text(meta: Mapping[str, Any]) -> str | None:

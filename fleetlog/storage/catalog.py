@@ -306,6 +306,7 @@ class LogCatalog:
             part=meta.part if meta is not None else None,
             notes=dict(meta.notes) if meta is not None else {},
             tags=tuple(meta.tags) if meta is not None else (),
+            opened=meta.opened if meta is not None else None,
         )
         if brief or info.alog is None:
             return info
@@ -327,6 +328,7 @@ class LogCatalog:
             part=info.part,
             notes=info.notes,
             tags=info.tags,
+            opened=info.opened,
         )
 
     def sessions(self, *, brief: bool = False) -> list[SessionInfo]:

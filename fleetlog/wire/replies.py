@@ -11,6 +11,7 @@ from a peer that lies is refused, never half-read. The requests these answer are
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -129,6 +130,8 @@ class SessionInfo:
             the parts of a split share the mission id); None without metadata.
         notes: its notes and ``tags`` its tags (session metadata; at most 64 each, as the
             recorder keeps them; a reply's others are left out).
+        opened: when the recorder opened this directory (session metadata): a split's later
+            part keeps its mission's LOGSTART as ``start``, so this is when the part began.
     """
 
     name: str
@@ -146,6 +149,7 @@ class SessionInfo:
     part: int | None = None
     notes: Mapping[str, str] = field(default_factory=dict)
     tags: tuple[str, ...] = ()
+    opened: float | None = None
 
     @property
     def size(self) -> int:
@@ -169,6 +173,7 @@ class SessionInfo:
             "part": self.part,
             "notes": dict(self.notes),
             "tags": list(self.tags),
+            "opened": self.opened,
             "size": self.size,
             "files": [f.as_json() for f in self.files],
         }
@@ -193,16 +198,17 @@ class SessionInfo:
                     float(required_field(item, "mtime", (int, float), "file")),
                 )
             )
-        start = optional_field(obj, "start", (int, float), what)
-        duration = optional_field(obj, "duration", (int, float), what)
+        start = _time(optional_field(obj, "start", (int, float), what))
+        duration = _time(optional_field(obj, "duration", (int, float), what))
+        opened = _time(optional_field(obj, "opened", (int, float), what))
         return cls(
             check_component(required_field(obj, "name", str, what), "session"),
             tuple(files),
             required_field(obj, "complete", bool, what),
             optional_field(obj, "stamp", str, what),
             optional_field(obj, "alog", str, what),
-            None if start is None else float(start),
-            None if duration is None else float(duration),
+            start,
+            duration,
             optional_field(obj, "vehicle", str, what),
             optional_field(obj, "variables", int, what),
             optional_field(obj, "state", str, what),
@@ -211,7 +217,22 @@ class SessionInfo:
             optional_field(obj, "part", int, what),
             _notes(obj.get("notes")),
             _tags(obj.get("tags")),
+            opened,
         )
+
+
+def _time(value: float | None) -> float | None:
+    """A time from a reply as a float; None if absent or not finite.
+
+    NaN, inf, or an integer too large for a float: a peer's reply is shown, not trusted.
+    """
+    if value is None:
+        return None
+    try:
+        number = float(value)
+    except OverflowError:
+        return None
+    return number if math.isfinite(number) else None
 
 
 def _notes(value: Any) -> dict[str, str]:

@@ -196,6 +196,9 @@ def test_the_shore_commands_the_recorder_and_sees_its_notes(
         (1, {"crew": "2", "site": "the bay", "event": "hit a buoy"}),
         (2, {"crew": "2", "site": "the bay", "event": "hit a buoy"}),
     ]
+    # part 2 opened after part 1, and both keep the mission's LOGSTART
+    assert found[0]["start"] == found[1]["start"]
+    assert found[1]["opened"] > found[0]["opened"] >= found[0]["start"] - 1
     first = tmp_path / found[0]["name"]
     info = run_cli("info", str(first), cwd=tmp_path, env=cli_env)
     assert info.returncode == 0, info.stderr

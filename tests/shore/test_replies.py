@@ -7,12 +7,16 @@ anything else, and what it returns is bounded.
 from __future__ import annotations
 
 import contextlib
+import io
 import json
+import math
 
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from rich.console import Console
 
+from fleetlog.cli.tables import human_duration, part_span, sessions_table
 from fleetlog.errors import FormatError
 from fleetlog.shore.status import MAX_COMMANDS, MAX_TEXT, VehicleStatus, describe_command
 from fleetlog.wire.query import (
@@ -159,3 +163,52 @@ def test_latest_names_its_server_and_recorder() -> None:
     assert LatestInfo.from_json(info.to_json()) == info
     served = LatestInfo("alpha", "S", False, "newest", server="bb")
     assert LatestInfo.from_json(served.to_json()).recorder is None
+
+
+session_objects = st.fixed_dictionaries(
+    {
+        "name": st.just("MOOSLog_1_2_2025_____10_00_00"),
+        "complete": st.booleans(),
+        "files": st.just([]),
+    },
+    optional={
+        key: st.none() | st.floats() | st.integers(min_value=-(10**400), max_value=10**400)
+        for key in ("start", "duration", "opened")
+    }
+    | {"part": st.none() | st.integers(min_value=-3, max_value=10**30)},
+)
+
+
+@settings(max_examples=300)
+@given(st.lists(session_objects, max_size=4))
+def test_a_hostile_listing_is_shown_not_crashed_on(objects: list[dict[str, object]]) -> None:
+    # NaN, inf and integers beyond a float are valid JSON to Python's parser: a vehicle can
+    # send them, and `fleetlog sessions` must still print its table.
+    infos = []
+    for obj in objects:
+        try:
+            infos.append(SessionInfo.from_json(json.loads(json.dumps(obj))))
+        except FormatError:
+            continue
+    for info in infos:
+        for value in (info.start, info.duration, info.opened):
+            assert value is None or math.isfinite(value)
+    out = io.StringIO()
+    Console(file=out, width=200).print(sessions_table(infos, None))
+    assert out.getvalue().count("MOOSLog_") == len(infos)
+
+
+def test_a_split_part_is_shown_from_when_it_opened() -> None:
+    # Part 2 keeps the mission's LOGSTART (1000): its last entry at 700 s is 1700 in all.
+    part = SessionInfo("S2", (), True, start=1000.0, duration=700.0, part=2, opened=1600.0)
+    assert part_span(part) == (1600.0, 100.0)
+    first = SessionInfo("S1", (), True, start=1000.0, duration=600.0, part=1, opened=1000.2)
+    assert part_span(first) == (1000.0, 600.0)  # part 1 is pLogger's LOGSTART, as before
+    assert part_span(SessionInfo("S", (), True, start=1000.0, duration=5.0)) == (1000.0, 5.0)
+    out = io.StringIO()
+    Console(file=out, width=200).print(sessions_table([first, part], "S2"))
+    assert "0:01:40" in out.getvalue()  # part 2 ran 100 s, not 700
+    assert SessionInfo.from_json(part.as_json()) == part
+    assert human_duration(float("nan")) == "-"
+    assert human_duration(1e300) == "-"
+    assert human_duration(-5.0) == "0:00:00"
