@@ -8,12 +8,12 @@ texts are cut short.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 from fleetlog.errors import FormatError
+from fleetlog.wire.json_fields import parse_json
 
 __all__ = ["ControlReply"]
 
@@ -59,7 +59,7 @@ class ControlReply:
             msg = f"the control reply is {len(data)} bytes long; at most {MAX_REPLY}"
             raise FormatError(msg)
         try:
-            obj = json.loads(data)
+            obj = parse_json(data)
         except (ValueError, RecursionError) as err:
             msg = f"the control reply is not JSON: {str(err)[:80]}"
             raise FormatError(msg) from None

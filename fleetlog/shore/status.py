@@ -9,7 +9,6 @@ A field this version does not know is kept in :attr:`VehicleStatus.raw` for ``--
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass, field
@@ -17,6 +16,7 @@ from typing import Any
 
 from fleetlog.errors import FormatError
 from fleetlog.wire.control import CommandRecord
+from fleetlog.wire.json_fields import parse_json
 
 __all__ = ["COUNTERS", "VehicleStatus", "describe_command"]
 
@@ -145,7 +145,7 @@ class VehicleStatus:
             msg = f"the status reply is {len(data)} bytes long; at most {MAX_STATUS}"
             raise FormatError(msg)
         try:
-            obj = json.loads(data)
+            obj = parse_json(data)
         except (ValueError, RecursionError) as err:
             msg = f"the status reply is not JSON: {str(err)[:80]}"
             raise FormatError(msg) from None

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import contextlib
-import json
 import queue
 from collections.abc import Sequence
 from typing import Any
@@ -12,6 +11,7 @@ import zenoh
 
 from fleetlog.errors import FormatError, QueryError
 from fleetlog.transport.session import translate_zerror
+from fleetlog.wire.json_fields import parse_json
 from fleetlog.wire.keys import fleet_service_selector, parse_service_key, service_key
 
 __all__ = [
@@ -166,7 +166,7 @@ def get_json(session: zenoh.Session, selector: str, *, timeout: float = 5.0) -> 
     out: list[Any] = []
     for sample in get_replies(session, selector, timeout=timeout):
         try:
-            out.append(json.loads(sample.payload.to_bytes()))
+            out.append(parse_json(sample.payload.to_bytes()))
         except ValueError as err:
             msg = f"reply on {sample.key_expr} is not JSON: {err}"
             raise QueryError(msg) from err

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from fleetlog.errors import FormatError
+from fleetlog.wire.json_fields import parse_json
 from fleetlog.wire.keys import check_component
 from fleetlog.wire.parameters import parse_parameters
 
@@ -119,7 +120,7 @@ def parse_control_request(
             msg = "give the request as a JSON payload or as parameters, not both"
             raise FormatError(msg)
         try:
-            obj = json.loads(payload)
+            obj = parse_json(payload)
         except (ValueError, RecursionError) as err:
             msg = f"the request is not JSON: {str(err)[:80]}"
             raise FormatError(msg) from None

@@ -12,12 +12,11 @@ every name here.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from typing import Any
 
 from fleetlog.errors import FormatError
-from fleetlog.wire.json_fields import dump_json, optional_field, required_field
+from fleetlog.wire.json_fields import dump_json, optional_field, parse_json, required_field
 
 __all__ = ["GrepEnd", "GrepHeader", "GrepRecord", "decode_grep_lines", "encode_grep_line"]
 
@@ -165,7 +164,7 @@ def decode_grep_lines(data: bytes) -> list[GrepHeader | GrepRecord | GrepEnd]:
         if not line:
             continue
         try:
-            obj = json.loads(line)
+            obj = parse_json(line)
         except ValueError as err:
             msg = f"grep reply: a line is not JSON: {err}"
             raise FormatError(msg) from None

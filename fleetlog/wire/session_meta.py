@@ -19,6 +19,7 @@ from dataclasses import dataclass, field, replace
 from typing import Any
 
 from fleetlog.errors import FormatError
+from fleetlog.wire.json_fields import parse_json
 
 __all__ = [
     "ACKS_NAME",
@@ -246,7 +247,7 @@ class SessionMeta:
             msg = f"session metadata is {len(data)} bytes long; at most {MAX_META_BYTES}"
             raise FormatError(msg)
         try:
-            obj = json.loads(data)
+            obj = parse_json(data)
         except ValueError as err:
             msg = f"session metadata is not JSON: {err}"
             raise FormatError(msg) from None

@@ -10,6 +10,7 @@ import contextlib
 import io
 import json
 import math
+from collections.abc import Callable
 
 import pytest
 from hypothesis import given, settings
@@ -18,7 +19,10 @@ from rich.console import Console
 
 from fleetlog.cli.tables import human_duration, part_span, sessions_table
 from fleetlog.errors import FormatError
+from fleetlog.shore.control import ControlReply
 from fleetlog.shore.status import MAX_COMMANDS, MAX_TEXT, VehicleStatus, describe_command
+from fleetlog.wire.control import parse_control_request
+from fleetlog.wire.grep_lines import decode_grep_lines
 from fleetlog.wire.query import (
     LatestInfo,
     SessionInfo,
@@ -28,6 +32,7 @@ from fleetlog.wire.query import (
     split_server,
     with_server,
 )
+from fleetlog.wire.session_meta import SessionMeta
 
 json_values = st.recursive(
     st.none() | st.booleans() | st.integers() | st.floats() | st.text(max_size=40),
@@ -212,3 +217,67 @@ def test_a_split_part_is_shown_from_when_it_opened() -> None:
     assert human_duration(float("nan")) == "-"
     assert human_duration(1e300) == "-"
     assert human_duration(-5.0) == "0:00:00"
+
+
+def _readers() -> list[tuple[str, Callable[[bytes], object]]]:
+    return [
+        ("latest", LatestInfo.from_json),
+        ("sessions", lambda b: sessions_by_server([b])),
+        ("status", lambda b: VehicleStatus.from_json(b, "aa")),
+        ("control reply", lambda b: ControlReply.from_json(b, "aa")),
+        ("control request", lambda b: parse_control_request(b, "")),
+        ("grep", decode_grep_lines),
+        ("session metadata", SessionMeta.from_bytes),
+    ]
+
+
+_CRAFTED = [
+    b"[" * 200_000 + b"]" * 200_000,  # the parser recursed per level: RecursionError
+    b'{"a":' * 100_000 + b"1" + b"}" * 100_000,
+    b'{"vehicle":"a","session":"S","writing":true,"how":"recorder","start":1' + b"0" * 400 + b"}",
+    b'{"vehicle":"a","directory":"./S","logged":1' + b"0" * 400 + b"}",
+    b'{"ok":true,"cmd":"x","did":"","time":1' + b"0" * 400 + b"}",
+    b"[1" + b"0" * 400 + b',"K","s","d","1",1]',
+]
+
+
+@pytest.mark.parametrize("payload", _CRAFTED, ids=range(len(_CRAFTED)))
+def test_every_reader_refuses_crafted_json_cleanly(payload: bytes) -> None:
+    # Valid JSON to Python's parser, and each crashed a reader (RecursionError, or the
+    # OverflowError of float(10**400)) before parse_json bounded them at the boundary.
+    for name, read in _readers():
+        try:
+            read(payload)
+        except FormatError:
+            pass
+        except Exception as err:
+            pytest.fail(f"{name} reader raised {type(err).__name__}: {err}")
+
+
+@settings(max_examples=300)
+@given(
+    st.recursive(
+        st.none()
+        | st.booleans()
+        | st.integers(min_value=-(10**400), max_value=10**400)
+        | st.floats()
+        | st.text(max_size=20),
+        lambda inner: (
+            st.lists(inner, max_size=6)
+            | st.dictionaries(
+                st.sampled_from(["start", "logged", "time", "ok", "cmd", "vehicle", "files", "x"]),
+                inner,
+            )
+        ),
+        max_leaves=40,
+    )
+)
+def test_every_reader_takes_any_json_with_huge_numbers(obj: object) -> None:
+    payload = json.dumps(obj).encode()
+    for name, read in _readers():
+        try:
+            read(payload)
+        except FormatError:
+            pass
+        except Exception as err:
+            pytest.fail(f"{name} reader raised {type(err).__name__}: {err}")
