@@ -129,6 +129,18 @@ class SnapshotTaking(DiskKeeping):
         self.debug(f"LOGGER_RESTART refused: {why}")
         return Outcome.refused("restart", why)
 
+    def split(self) -> Outcome:
+        """SPLIT; refused in snapshot mode, as LOGGER_RESTART is.
+
+        A split would cut the snapshot being written in two directories (or open one that no
+        SNAPSHOT asked for), and the snapshot's rest would go to the wrong one.
+        """
+        if self._snap is None:
+            return super().split()
+        why = "in snapshot mode a session is written by SNAPSHOT only"
+        self.debug(f"SPLIT refused: {why}")
+        return Outcome.refused("split", why)
+
     def stop(self) -> None:
         """Write the rest of a snapshot being written, then close everything."""
         snap = self._snap

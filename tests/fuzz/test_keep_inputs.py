@@ -139,6 +139,10 @@ class _Clock:
         return self.t
 
 
+#: the entries the recorder writes of its own: losses, pauses (a PAUSE command), parameters
+_OWN_MARKS = ("PLOGGER_GAP", "PLOGGER_PAUSE", "PLOGGER_PARAMETERS")
+
+
 class _SnapshotRig:
     """A snapshot-mode recorder reused by every case of a run (its ring wraps, as in a flood)."""
 
@@ -208,7 +212,7 @@ class _SnapshotRig:
             with open(alog, encoding="utf-8", errors="surrogateescape", newline="") as f:
                 for entry in iter_entries(f):
                     # only what was sent, and the recorder's own marks: nothing forged
-                    assert entry.key in self.names or entry.key == "PLOGGER_GAP", entry
+                    assert entry.key in self.names or entry.key in _OWN_MARKS, entry
         shutil.rmtree(self.where, ignore_errors=True)
 
 
