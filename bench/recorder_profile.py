@@ -8,6 +8,8 @@ of ``--repeat``:
 
 * recv: draining the filled FIFO with ``try_recv`` (what the service loop pays per sample);
 * decode: ``SampleDecoder.decode`` (key → name, payload, attachment);
+* lane: the drain's way, :class:`~fleetlog.recorder.lane.Lane` (the common samples formatted
+  straight into their line, 32 at a time, with the flushes the drain would make);
 * handle: ``Recorder.handle`` on the decoded messages (default config: wildcard logging,
   writing a real session in a temporary directory), including LineFormatter, and the
   flushes the service would make (every 5 ms);
@@ -15,7 +17,7 @@ of ``--repeat``:
 * publish: ``MoosPublisher.publish`` into a session with no subscriber (the publisher's
   own cost, which bounds the bare-subscriber figure of recorder_rate.py).
 
-``--profile`` adds a cProfile of decode + handle (top functions by own time).
+``--profile`` adds a cProfile of the lane (top functions by own time).
 
 ``--service`` instead runs a whole :class:`RecorderService` (default configuration) in a
 thread of this process, fed by a publisher process at full speed (``--raw``: pre-encoded
@@ -48,10 +50,12 @@ from benchlib import ROOT, VEHICLE, Helper, free_port, key_names, loadavg, match
 from fleetlog.moos.alog import LineFormatter
 from fleetlog.moos.mission import LoggerConfig
 from fleetlog.recorder.engine import Recorder
+from fleetlog.recorder.lane import Lane
 from fleetlog.recorder.service import RecorderService, ServiceOptions
 from fleetlog.transport.bus import MoosPublisher, SampleDecoder
 from fleetlog.transport.session import SessionOptions, open_session
 from fleetlog.wire.keys import var_key
+from fleetlog.wire.message import attachment_fields
 
 
 def collect(n: int, keys: int) -> tuple[list[Any], list[float]]:
@@ -193,7 +197,7 @@ def main() -> int:
     parser.add_argument("-n", type=int, default=200_000)
     parser.add_argument("--keys", type=int, default=4)
     parser.add_argument("--repeat", type=int, default=5)
-    parser.add_argument("--profile", action="store_true", help="cProfile decode + handle")
+    parser.add_argument("--profile", action="store_true", help="cProfile the lane")
     parser.add_argument("--service", action="store_true", help="profile a RecorderService")
     parser.add_argument("--raw", action="store_true", help="--service: pre-encoded zenoh puts")
     args = parser.parse_args()
@@ -219,10 +223,22 @@ def main() -> int:
     with tempfile.TemporaryDirectory(prefix="fleetlog-prof-") as tmp:
         posted: list[object] = []
 
+        # The recorders' clock runs from just before the first sample was published, as a
+        # recorder that was running then would see it (else every sample would be older than
+        # LOGSTART: skewed, restamped, and never the lane's).
+        first = attachment_fields(samples[0].attachment.to_bytes())[0]
+
         def make_recorder(index: int) -> Recorder:
             cwd = Path(tmp) / f"r{index}"
             cwd.mkdir()
-            rec = Recorder(LoggerConfig.default(), vehicle=VEHICLE, publish=posted.append, cwd=cwd)
+            shift = time.time() - first + 0.001
+
+            def clock() -> float:
+                return time.time() - shift
+
+            rec = Recorder(
+                LoggerConfig.default(), vehicle=VEHICLE, publish=posted.append, cwd=cwd, clock=clock
+            )
             rec.start()
             return rec
 
@@ -255,6 +271,27 @@ def main() -> int:
             rec.stop()
             return len(samples)
 
+        def run_lane() -> int:
+            rec = make_recorder(next(counter))
+            lane = Lane(rec, SampleDecoder(prefix), lambda info, sample: None)
+            rest = iter(samples)
+
+            def try_recv() -> Any:
+                return next(rest, None)
+
+            flush_due = rec.flush_due
+            while True:
+                first = next(rest, None)
+                if first is None:
+                    break
+                if lane.pump(first, try_recv, 32) < 32:
+                    break
+                if flush_due(0.005):
+                    rec.flush()
+            rec.stop()
+            assert lane.fast >= len(samples) - keys, "the lane did not take the samples"
+            return len(samples)
+
         def run_format() -> int:
             fmt = LineFormatter()
             double = fmt.double
@@ -278,6 +315,7 @@ def main() -> int:
             ("decode", run_decode),
             ("handle (engine+format+write)", run_handle),
             ("decode + handle", run_decode_handle),
+            ("lane (what the drain runs)", run_lane),
             ("format (LineFormatter.double)", run_format),
             ("publish (MoosPublisher, no sub)", run_publish),
         ]
@@ -291,11 +329,13 @@ def main() -> int:
             print(f"  {label:<34} {low:6.2f}   [{runs}]", flush=True)
         total = statistics.median(drains) + results["decode + handle"]
         print(f"  {'recv + decode + handle':<34} {total:6.2f}  → ceiling {1e6 / total:,.0f}/s")
+        total = statistics.median(drains) + results["lane (what the drain runs)"]
+        print(f"  {'recv + lane':<34} {total:6.2f}  → ceiling {1e6 / total:,.0f}/s")
 
         if args.profile:
             prof = cProfile.Profile()
             prof.enable()
-            run_decode_handle()
+            run_lane()
             prof.disable()
             print()
             pstats.Stats(prof).sort_stats("tottime").print_stats(18)

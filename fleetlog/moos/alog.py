@@ -315,6 +315,20 @@ class LineFormatter:
         """Return the time, key and source columns with their spaces (the blog record head)."""
         return self._time_fmt % offset + self._prefix(key, source)
 
+    def line_formats(self, key: str, source: str) -> tuple[str, str]:
+        """Return the ``%`` formats of a double's and a string's line for this key and source.
+
+        ``double_fmt % (offset, value)`` is :meth:`double`'s line for every value but NaN,
+        and ``string_fmt % (offset, value)`` is :meth:`string`'s (the recorder's fast lane
+        formats a whole line in one step with them).
+        """
+        head = self._time_fmt + self._prefix(key, source).replace("%", "%%")
+        double_marker, string_marker = ("D:", "S:") if self._mark_data_type else ("", "")
+        return (
+            f"{head}{double_marker}%-12.{self._double_precision}f \n",
+            f"{head}{string_marker}%s \n",
+        )
+
 
 # --------------------------------------------------------------------------------------------
 # Reading

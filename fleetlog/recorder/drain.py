@@ -2,9 +2,10 @@
 
 One thread drains the subscribers' FIFO channels (``try_recv``: no Python callback and no
 file I/O in Zenoh's threads, and a full FIFO makes Zenoh hold BLOCK publishers back instead
-of dropping), hands each sample to the :class:`~fleetlog.recorder.engine.Recorder`, and
-flushes plain logs as soon as the channels are empty, or within 5 ms of a line being written
-while they are not.
+of dropping), hands them to the :class:`~fleetlog.recorder.engine.Recorder` through its
+:class:`~fleetlog.recorder.lane.Lane` (the common samples formatted straight into their
+line, the others decoded and handled), and flushes plain logs as soon as the channels are
+empty, or within 5 ms of a line being written while they are not.
 
 When the channels stay empty the thread sleeps until there is work instead of polling: each
 FIFO's :class:`Inbox` then lends it to a watcher thread blocked in the FIFO's ``recv`` (no
@@ -26,6 +27,7 @@ from typing import Any, Protocol
 
 from fleetlog.errors import TransportError
 from fleetlog.recorder.engine import Recorder
+from fleetlog.recorder.lane import Lane
 from fleetlog.transport.bus import MissCounter, SampleDecoder
 from fleetlog.transport.session import translate_zerror
 
@@ -33,9 +35,9 @@ __all__ = ["Drain", "Fifo", "Inbox", "Wake"]
 
 _FLUSH_DELAY = 0.005
 _TICK = 0.02
-#: inside a long drain batch, whether a flush is due is checked every this many samples
-#: (a power of two): at 6-10 µs per sample that is every 0.2-0.3 ms, and the check (0.11 µs)
-#: costs 0.003 µs per sample
+#: samples handed to the lane at a time: between two such runs the drain checks whether a
+#: flush is due and whether the subscriber had its slice (at 2-6 µs per sample, every
+#: 0.1-0.2 ms; the checks cost 0.01 µs per sample)
 _CHECK_EVERY = 32
 #: the longest one subscriber's batch may hold the drain thread before the others get a
 #: turn: a flood of costly commands on one key must not hold back the variables on the rest
@@ -207,6 +209,8 @@ class Drain:
         self._drained_at = 0.0
         #: how many times the thread slept until there was work (tests, benchmarks)
         self.sleeps = 0
+        #: the running drain's fast lane (tests, benchmarks)
+        self.lane: Lane | None = None
 
     def add(self, sub: Fifo) -> None:
         """Drain one more subscriber (from any point of the drain thread's work)."""
@@ -322,14 +326,12 @@ class Drain:
     def _run(self) -> None:
         recorder = self.recorder
         decoder = SampleDecoder(self._prefix)
-        decode = decoder.decode
-        handle = recorder.handle
+        lane = self.lane = Lane(recorder, decoder, self.misses.seen)
+        pump = lane.pump
         monotonic = time.monotonic
         next_tick = 0.0
         idle = 0
         stop = self._stop
-        mask = _CHECK_EVERY - 1
-        seen = self.misses.seen
         commands = recorder.commands
         watchdog = self._watchdog
         inboxes = self.inboxes
@@ -347,23 +349,15 @@ class Drain:
                 else:
                     inbox.held = None
                 while sample is not None:
-                    # Numbered samples (DROP publishers) are checked for gaps: 0.05 µs for
-                    # the others (bench/miss_detection.py).
-                    info = sample.source_info
-                    if info is not None:
-                        seen(info, sample)
-                    incoming = decode(sample)
-                    if incoming is not None:
-                        handle(incoming.message, garbled=incoming.garbled)
-                    else:
-                        recorder.unreadable(str(sample.key_expr))
-                    batch += 1
-                    if not batch & mask:
-                        if recorder.flush_due(_FLUSH_DELAY):
-                            recorder.flush()
-                        if monotonic() - began > _SLICE:
-                            break
-                    if batch >= 8192:
+                    # _CHECK_EVERY samples at a time (fewer: the FIFO is empty), then whether
+                    # a flush is due and whether this subscriber had its slice.
+                    done = pump(sample, try_recv, _CHECK_EVERY)
+                    batch += done
+                    if done < _CHECK_EVERY:
+                        break
+                    if recorder.flush_due(_FLUSH_DELAY):
+                        recorder.flush()
+                    if monotonic() - began > _SLICE or batch >= 8192:
                         break
                     sample = try_recv()
                 got += batch

@@ -18,12 +18,11 @@ from pathlib import Path
 from typing import Any
 
 from fleetlog.errors import FleetlogError, MissionError, RecorderError, StorageError
-from fleetlog.moos.alog import LineFormatter, Variant, source_field
+from fleetlog.moos.alog import LineFormatter, Variant
 from fleetlog.moos.mission import LoggerConfig, LogSpec, parse_log_spec
 from fleetlog.moos.naming import copy_file_name
 from fleetlog.moos.patterns import Verdict, WildcardClassifier, name_to_chunk
 from fleetlog.moos.slog import SlogTable, SlotPatch
-from fleetlog.moos.ylog import format_ylog_line
 from fleetlog.recorder.clocksync import clock_state
 from fleetlog.recorder.control import (
     MAX_COPIES,
@@ -35,10 +34,11 @@ from fleetlog.recorder.control import (
     quote,
 )
 from fleetlog.recorder.disk import DiskGuard
+from fleetlog.recorder.intake import Intake, VarState
 from fleetlog.recorder.losses import LossLedger
 from fleetlog.recorder.modes import ModeState
 from fleetlog.recorder.sessions import Background, Health, MetaState, inline
-from fleetlog.recorder.snapshot_mode import SKEW_TOLERANCE, SnapshotState, SnapshotTaking
+from fleetlog.recorder.snapshot_mode import SKEW_TOLERANCE, SnapshotState
 from fleetlog.recorder.stats import RecorderStats
 from fleetlog.storage.metafile import boot_id, host_name
 from fleetlog.storage.procinfo import ProcessMonitor
@@ -58,19 +58,6 @@ MISSED_REPORT_INTERVAL = 1.0
 _SYSTEM_VARS = ("MOOS_DEBUG", "MOOS_SYSTEM")
 
 Publish = Callable[[MoosMessage], None]
-
-
-@dataclass(slots=True)
-class _Var:
-    """Per-variable state, built once per name (the hot path reads only this)."""
-
-    verdict: Verdict
-    period: float
-    system: bool
-    last_logged: float = -1e300
-    last_seen: float | None = None
-    #: the type of the variable's first value (float, str or bytes)
-    kind: type | None = None
 
 
 @dataclass
@@ -108,7 +95,7 @@ class _AppStatus:
     subscribed: set[str] = field(default_factory=set)
 
 
-class Recorder(SnapshotTaking):
+class Recorder(Intake):
     """One vehicle's pLogger: sessions on disk from a stream of MOOS messages.
 
     Args:
@@ -165,7 +152,7 @@ class Recorder(SnapshotTaking):
             exclusion_log=config.wildcard_exclusion_log,
             wildcard_enabled=config.wildcard_logging,
         )
-        self._vars: dict[str, _Var] = {}
+        self._vars: dict[str, VarState] = {}
         self._sources: dict[tuple[str, str, str], str] = {}
         self.commands = CommandHandler(self, clock)
         #: the two command variables (LOGGER_RESTART, <APP>_CMD)
@@ -240,9 +227,9 @@ class Recorder(SnapshotTaking):
         self.post("MOOS_DEBUG", text)
 
     # ---------------------------------------------------------------------------------------
-    # Incoming (the hot path)
+    # Variables (the per-sample path is recorder/intake.py and recorder/lane.py)
 
-    def _var(self, name: str) -> _Var:
+    def _var(self, name: str) -> VarState:
         verdict = self._classifier.classify(name)
         spec = self._specs.get(name)
         if spec is not None:
@@ -251,7 +238,12 @@ class Recorder(SnapshotTaking):
             period = 0.5
         else:
             period = 0.0
-        var = _Var(verdict, period, name.upper() in _SYSTEM_VARS)
+        system = name.upper() in _SYSTEM_VARS
+        var = VarState(verdict, period, system)
+        # What the fast lane may write as it comes (recorder/lane.py): handle's plain case.
+        var.plain = (
+            verdict is Verdict.ALOG and period == 0.0 and not system and name not in self._cmd_names
+        )
         if len(self._vars) > 65536:
             self._vars.clear()
             self._app.subscribed.clear()
@@ -259,158 +251,6 @@ class Recorder(SnapshotTaking):
             self._app.subscribed.add(name)
         self._vars[name] = var
         return var
-
-    def _source(self, msg: MoosMessage) -> str:
-        ident = (msg.source, msg.aux, msg.community)
-        text = self._sources.get(ident)
-        if text is None:
-            cfg = self.config
-            text = source_field(
-                msg.source or "?",
-                msg.aux,
-                msg.community,
-                log_aux=cfg.log_aux_src,
-                mark_external=cfg.mark_external_community_messages,
-                own_community=self.vehicle,
-            )
-            if len(self._sources) > 4096:
-                self._sources.clear()
-            self._sources[ident] = text
-        return text
-
-    def handle(self, msg: MoosMessage, *, garbled: bool = False) -> None:
-        """Log one received message (and act on it if it is a command)."""
-        stats = self.stats
-        stats.received += 1
-        if garbled:
-            stats.garbled += 1
-        name = msg.name
-        var = self._vars.get(name) or self._var(name)
-        kind = type(msg.value)
-        if var.kind is not kind:
-            if var.kind is None:
-                var.kind = kind
-            else:
-                stats.type_clashes += 1
-        is_command = name in self._cmd_names
-        now = self._clock()
-        var.last_seen = now
-        if var.period > 0.0:
-            # The MOOSDB's minimum delivery interval: posts inside it are not delivered.
-            if now - var.last_logged < var.period:
-                stats.throttled += 1
-                return
-            var.last_logged = now
-        verdict = var.verdict
-        snap = self._snap
-        if snap is not None:
-            # Snapshot mode: held in memory, written by a SNAPSHOT (recorder/snapshot_mode.py).
-            if verdict is not Verdict.IGNORE:
-                if self._modes.paused:
-                    stats.paused += 1  # paused: not even held
-                else:
-                    self._hold(snap, msg, now)
-            if is_command:
-                self._command(msg)
-            return
-        session = self.session
-        if session is None or self._modes.paused:
-            if verdict is not Verdict.IGNORE or var.system:
-                if self._modes.paused:
-                    stats.paused += 1  # not written, by the operator's choice: not lost
-                else:
-                    stats.lost += 1
-                    self.losses.add(self._h.broken or "no-session", 1, now, name=name)
-            if is_command:
-                self._command(msg)
-            return
-        stamp = msg.time
-        # The skew rule (docs/compat.md): only a time that is not finite, before LOGSTART or
-        # more than 5 s ahead of the sample's arrival is replaced, by the arrival time. A
-        # late sample (a backlog, here or on the way) keeps its own time. The comparisons
-        # are written so that NaN fails them.
-        if not (stamp >= self.logstart and stamp - now <= SKEW_TOLERANCE):
-            stats.skewed += 1
-            stamp = now
-        offset = stamp - self.logstart
-        try:
-            if verdict is Verdict.ALOG:
-                if self.config.async_log:
-                    session.alog.write(self._line(session, offset, name, msg))
-                stats.logged += 1
-            elif verdict is Verdict.XLOG:
-                if session.xlog is not None:
-                    session.xlog.write(self._line(session, offset, name, msg))
-                stats.excluded += 1
-            else:
-                stats.ignored += 1
-            if var.system and verdict is not Verdict.IGNORE:
-                value = msg.value
-                if not isinstance(value, bytes):
-                    session.ylog.write(format_ylog_line(offset, name, msg.source or "?", value))
-            if self.synclog is not None:
-                value = msg.value
-                # The slog holds doubles only; a binary sample shows NaN, as a string does.
-                self.synclog.update(name, "" if isinstance(value, bytes) else value)
-        except StorageError as err:
-            # A binary record failed: this sample's line was never written.
-            self._storage_failed(err, lost=1)
-        else:
-            if self._unflushed_since is None:
-                self._unflushed_since = now
-        if is_command:
-            self._command(msg)
-
-    def unreadable(self, key: str) -> None:
-        """Count a sample whose key names no MOOS variable (a malformed escape, docs/wire.md).
-
-        It cannot be logged without a name; it is counted as garbled and lost, and the
-        first one of each key is reported on MOOS_DEBUG.
-        """
-        stats = self.stats
-        stats.received += 1
-        stats.garbled += 1
-        stats.lost += 1
-        self.losses.add("unreadable", 1, self._clock())
-        # Reported once per key; past 1024 keys only counted, so a flood of distinct bad
-        # keys cannot turn into a flood of MOOS_DEBUG posts.
-        if key not in self._h.unreadable and len(self._h.unreadable) < 1024:
-            self._h.unreadable.add(key)
-            self.debug(f"sample on {key} names no MOOS variable: not logged")
-
-    def missed(self, name: str | None, source: str, count: int) -> None:
-        """Count samples of ``name`` that publisher ``source`` sent but that never arrived.
-
-        The transport finds them from sample-miss detection (DROP publishers, docs/wire.md).
-        They are lost unless the variable is one the recorder would not have logged anyway;
-        MOOS_DEBUG reports them per publisher, at most once a second (:meth:`tick`).
-        """
-        stats = self.stats
-        stats.missed += count
-        now = self._clock()
-        if name is None:
-            stats.lost += count
-            self.losses.add("dropped", count, now)
-        else:
-            var = self._vars.get(name) or self._var(name)
-            if var.verdict is not Verdict.IGNORE or var.system:
-                stats.lost += count
-                self.losses.add("dropped", count, now, name=name)
-        self._h.missed[source] = self._h.missed.get(source, 0) + count
-
-    def _vars_verdict(self, name: str) -> tuple[Verdict, bool]:
-        var = self._vars.get(name) or self._var(name)
-        return var.verdict, var.system
-
-    def _line(self, session: SessionWriter, offset: float, name: str, msg: MoosMessage) -> str:
-        value = msg.value
-        source = self._source(msg)
-        if isinstance(value, str):
-            return self._fmt.string(offset, name, source, value)
-        if isinstance(value, bytes):
-            ref = session.write_blog(self._fmt.prefix(offset, name, source), value)
-            return self._fmt.binary(offset, name, source, ref)
-        return self._fmt.double(offset, name, source, value)
 
     # ---------------------------------------------------------------------------------------
     # Commands

@@ -34,7 +34,9 @@ from fleetlog.wire.message import (
 )
 
 __all__ = [
+    "DOUBLE_ENCODING",
     "MISS_HEARTBEAT",
+    "STRING_ENCODING",
     "Incoming",
     "MissCounter",
     "MoosPublisher",
@@ -52,6 +54,9 @@ _ENCODING_OBJECTS: dict[Kind, zenoh.Encoding] = {k: zenoh.Encoding(v) for k, v i
 # Comparing a sample's encoding with these costs a third of turning it into text.
 _DOUBLE_ENCODING = _ENCODING_OBJECTS[Kind.DOUBLE]
 _STRING_ENCODING = _ENCODING_OBJECTS[Kind.STRING]
+#: the encodings of doubles and strings (``sample.encoding ==`` one of them: the fast lane)
+DOUBLE_ENCODING = _DOUBLE_ENCODING
+STRING_ENCODING = _STRING_ENCODING
 
 
 def zenoh_time(sample: zenoh.Sample) -> float | None:
@@ -134,6 +139,29 @@ class SampleDecoder:
                 self._origins.clear()
             self._origins[ident] = origin
         return origin
+
+    def plain_name(self, key: str) -> str | None:
+        """Return the MOOS name of a variable key whose name needed no escaping, else None."""
+        name = self.name_of(key)
+        if name is None or key in self._escaped:
+            return None
+        return name
+
+    def plain_origin(self, attachment: bytes) -> tuple[str, str, str] | None:
+        """Return an attachment's ``(source, aux, community)`` if they need no escaping.
+
+        None when the attachment is not readable, carries an original (replay) time, or
+        has a field that had to be escaped: its samples go the general way (:meth:`decode`).
+        The answer depends only on ``attachment[8:]`` (the time comes first).
+        """
+        try:
+            _, source, aux, community, original = attachment_fields(attachment)
+        except FormatError:
+            return None
+        if original is not None:
+            return None
+        source, aux, community, escaped = self._origin(source, aux, community)
+        return None if escaped else (source, aux, community)
 
     def decode(self, sample: zenoh.Sample) -> Incoming | None:
         """Decode a sample; None when its key is not a variable key of this vehicle."""
