@@ -46,12 +46,12 @@ from fleetlog.storage.alogscan import HeadInfo, VariableScan, is_compressed, rea
 from fleetlog.storage.confined import ConfinedRoot, DigestCache
 from fleetlog.storage.leases import FileLeases
 from fleetlog.storage.metafile import read_meta, recorder_alive
+from fleetlog.storage.sessionalog import ALOG_SUFFIXES, holds_alog
 from fleetlog.wire.query import FileInfo, FileMeta, LatestInfo, SessionInfo, check_component
 from fleetlog.wire.session_meta import CUT, META_NAME, OPEN, SessionMeta
 
 __all__ = ["ALOG_SUFFIXES", "QUIET_SECONDS", "LogCatalog", "disk_space"]
 
-ALOG_SUFFIXES = (".alog", ".alog.zst", ".alog.gz")
 #: a session none of whose files changed for this long is complete (without a recorder)
 QUIET_SECONDS = 5.0
 _HINT_MAX = 4096
@@ -175,8 +175,7 @@ class LogCatalog:
             check_component(entry.name, "session")
             if not entry.is_dir() or not self.root.contains(entry.path):
                 return False
-            with os.scandir(entry.path) as it:
-                return any(e.name.endswith(ALOG_SUFFIXES) for e in it)
+            return holds_alog(entry.path)
         except (OSError, FormatError):
             return False
 
@@ -209,9 +208,7 @@ class LogCatalog:
     def has_session(self, session: str) -> bool:
         """Return True if ``session`` names a session directory under the root."""
         try:
-            directory = self.root.resolve(session)
-            with os.scandir(directory) as it:
-                return any(e.name.endswith(ALOG_SUFFIXES) for e in it)
+            return holds_alog(self.root.resolve(session))
         except (OSError, FormatError, StorageError):
             return False
 

@@ -52,6 +52,7 @@ from fleetlog.moos.naming import parse_session_root
 from fleetlog.storage.download import sha256_file
 from fleetlog.storage.leases import exclusive_files
 from fleetlog.storage.metafile import read_meta, recorder_alive
+from fleetlog.storage.sessionalog import ALOG_SUFFIXES, holds_alog
 from fleetlog.wire.query import check_component
 from fleetlog.wire.session_meta import ACKS_NAME, OPEN
 
@@ -75,7 +76,6 @@ __all__ = [
 ]
 
 #: what makes a directory under the log root a session (as the catalog says)
-ALOG_SUFFIXES = (".alog", ".alog.zst", ".alog.gz")
 #: why a session is protected
 CURRENT = "it is the session being recorded"
 LIVE = "a live recorder holds it"
@@ -265,8 +265,7 @@ def _is_session(entry: os.DirEntry[str]) -> bool:
         check_component(entry.name, "session")
         if entry.name.startswith(".") or not entry.is_dir(follow_symlinks=False):
             return False
-        with os.scandir(entry.path) as it:
-            return any(e.name.endswith(ALOG_SUFFIXES) for e in it)
+        return holds_alog(entry.path)
     except (OSError, FormatError):
         return False
 

@@ -1,4 +1,4 @@
-"""Which file is a session directory's alog."""
+"""Which file is a session directory's alog, and whether a directory holds one."""
 
 from __future__ import annotations
 
@@ -7,9 +7,22 @@ from pathlib import Path
 
 from fleetlog.errors import StorageError
 
-__all__ = ["find_alog"]
+__all__ = ["ALOG_SUFFIXES", "find_alog", "holds_alog"]
 
-_ALOG_SUFFIXES = (".alog", ".alog.zst", ".alog.gz")
+#: an alog as pLogger writes it, or compressed by fleetlog
+ALOG_SUFFIXES = (".alog", ".alog.zst", ".alog.gz")
+
+
+def holds_alog(directory: str | os.PathLike[str]) -> bool:
+    """Whether ``directory`` holds an alog file: what makes a directory a session.
+
+    A directory that only *holds a directory* named ``X.alog`` is not one.
+
+    Raises:
+        OSError: the directory cannot be listed.
+    """
+    with os.scandir(directory) as it:
+        return any(e.name.endswith(ALOG_SUFFIXES) and e.is_file() for e in it)
 
 
 def find_alog(session_dir: str | os.PathLike[str]) -> Path:
@@ -23,7 +36,7 @@ def find_alog(session_dir: str | os.PathLike[str]) -> Path:
             none is named after it.
     """
     directory = Path(session_dir)
-    for suffix in _ALOG_SUFFIXES:
+    for suffix in ALOG_SUFFIXES:
         named = directory / (directory.name + suffix)
         if named.is_file():
             return named
@@ -31,7 +44,7 @@ def find_alog(session_dir: str | os.PathLike[str]) -> Path:
         found = sorted(
             child
             for child in directory.iterdir()
-            if child.name.endswith(_ALOG_SUFFIXES) and child.is_file()
+            if child.name.endswith(ALOG_SUFFIXES) and child.is_file()
         )
     except OSError as err:
         msg = f"cannot list session directory {directory}: {err.strerror or err}"

@@ -304,3 +304,19 @@ def test_part_file_resumes_and_commits(tmp_path: Path) -> None:
     stranger = PartFile(final.with_name("g"), {**source, "file": "g", "session": "T"})
     assert stranger.open() == 0
     stranger.close()
+
+
+def test_a_directory_named_like_an_alog_makes_no_session(tmp_path: Path) -> None:
+    # A session is a directory holding an alog *file*; one holding only a directory named
+    # X.alog (or a copied tree) is not listed, fetched or pruned as a session.
+    root = tmp_path / "logs"
+    fake = root / "MOOSLog_1_2_2025_____10_00_00"
+    (fake / "inner.alog").mkdir(parents=True)
+    (fake / "x.alog.zst").mkdir()
+    real = root / "MOOSLog_1_2_2025_____10_00_05"
+    real.mkdir()
+    (real / f"{real.name}.alog").write_bytes(b"")
+    catalog = LogCatalog(root, vehicle="v")
+    assert catalog.session_names() == [real.name]
+    assert not catalog.has_session(fake.name)
+    assert catalog.has_session(real.name)
