@@ -74,7 +74,7 @@ def prepare_package(path: Path) -> list[tuple[str, int, bytes]]:
         part = frame.select(
             "variable",
             ((pl.col("offset") * 1e9).round().cast(pl.Int64) + base).alias("t"),
-            _json(frame).cast(pl.Binary).alias("d"),
+            _json().cast(pl.Binary).alias("d"),
         )
         rows.extend(part.iter_rows())
     return rows
@@ -102,6 +102,9 @@ def main() -> None:
     parser.add_argument("-n", type=int, default=1_000_000, help="lines in the log")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--mcap-package", action="store_true", help="also time (d)")
+    parser.add_argument(
+        "--only", default="", help="comma-separated subset of read,parquet,mcap (read always runs)"
+    )
     args = parser.parse_args()
     log = Path(tempfile.gettempdir()) / f"fleetlog-bench-export-{args.n}.alog"
     if not log.exists():
@@ -109,7 +112,11 @@ def main() -> None:
         write_alog(log, args.n)
     rows = prepare_package(log) if args.mcap_package else None
     runs = {"read": run_read, "parquet": run_parquet, "mcap": run_mcap}
+    if args.only:
+        keep = {"read", *args.only.split(",")}
+        runs = {k: v for k, v in runs.items() if k in keep}
     times: dict[str, list[float]] = {name: [] for name in runs}
+    cpus: dict[str, list[float]] = {name: [] for name in runs}
     if rows is not None:
         times["mcap package"] = []
     print(f"load before: {loadavg()}", flush=True)
@@ -117,10 +124,15 @@ def main() -> None:
         out = Path(tmp)
         for r in range(args.rounds):
             for name, fn in runs.items():
-                began = time.perf_counter()
+                began, cpu = time.perf_counter(), time.process_time()
                 n = fn(log, out)
                 times[name].append(time.perf_counter() - began)
-                print(f"round {r + 1} {name:8} {n:,} entries {times[name][-1]:.2f} s", flush=True)
+                cpus[name].append(time.process_time() - cpu)
+                print(
+                    f"round {r + 1} {name:8} {n:,} entries {times[name][-1]:.2f} s"
+                    f" (CPU {cpus[name][-1]:.2f} s)",
+                    flush=True,
+                )
             if rows is not None:
                 began = time.perf_counter()
                 run_package(rows, out)
@@ -132,14 +144,22 @@ def main() -> None:
         f"log {log.stat().st_size / 1e6:.1f} MB; outputs "
         + ", ".join(f"{k} {v / 1e6:.1f} MB" for k, v in sorted(sizes.items()))
     )
-    print("| | seconds median [min-max] | entries/s | ratio to read, median [min-max] |")
-    print("|---|---|---|---|")
+    print(
+        "| | seconds median [min-max] | entries/s | ratio to read, median [min-max] | CPU ratio |"
+    )
+    print("|---|---|---|---|---|")
     for name, values in times.items():
         ratios = [v / b for v, b in zip(values, times["read"], strict=True)]
+        cpu_ratios = [v / b for v, b in zip(cpus.get(name, []), cpus["read"], strict=False)]
+        cpu = (
+            f"{statistics.median(cpu_ratios):.2f}x [{min(cpu_ratios):.2f}-{max(cpu_ratios):.2f}]"
+            if cpu_ratios
+            else "-"
+        )
         print(
             f"| {name} | {statistics.median(values):.2f} [{min(values):.2f}-{max(values):.2f}]"
             f" | {args.n / statistics.median(values):,.0f}"
-            f" | {statistics.median(ratios):.2f}x [{min(ratios):.2f}-{max(ratios):.2f}] |"
+            f" | {statistics.median(ratios):.2f}x [{min(ratios):.2f}-{max(ratios):.2f}] | {cpu} |"
         )
 
 

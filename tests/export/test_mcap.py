@@ -223,3 +223,65 @@ def test_numpy_and_pure_python_assembly_write_the_same_bytes() -> None:
     assert files[0] == files[1]
     reader = make_reader(io.BytesIO(files[1]), validate_crcs=True)
     assert sum(1 for _ in reader.iter_messages()) == n + 7 + 1
+
+
+def test_derived_json_text_is_what_json_encode_writes() -> None:
+    # foxglove.py writes the position messages as text (faster); json_encode is the oracle
+    from fleetlog.export.foxglove import locations, poses
+
+    rng = random.Random(5)
+    specials = [float("nan"), float("inf"), -float("inf"), 0.0, -0.0, 1e16, 1e-7, 5e-324, 1e308]
+    rows = []
+    for i in range(400):
+        for var in ("NAV_X", "NAV_Y", "NAV_HEADING", "NAV_Z", "NAV_LAT", "NAV_LONG"):
+            value = rng.choice(specials) if rng.random() < 0.2 else rng.uniform(-1e6, 1e6)
+            rows.append((1_750_000_000_000_000_000 + i * 123_456_789, var, value))
+    nav = pl.DataFrame(
+        rows,
+        schema={"log_time": pl.UInt64, "variable": pl.String, "double": pl.Float64},
+        orient="row",
+    )
+    vehicle = 'v"é\\1'
+    half_yaw = (90.0 - pl.col("NAV_HEADING")) * (math.pi / 360.0)
+    stamp = pl.struct(
+        sec=(pl.col("log_time") // 1_000_000_000).cast(pl.Int64),
+        nsec=(pl.col("log_time") % 1_000_000_000).cast(pl.Int64),
+    )
+    oracle_pose = pl.struct(
+        timestamp=stamp,
+        frame_id=pl.lit("map"),
+        pose=pl.struct(
+            position=pl.struct(x=pl.col("NAV_X"), y=pl.col("NAV_Y"), z=pl.col("NAV_Z")),
+            orientation=pl.struct(x=pl.lit(0.0), y=pl.lit(0.0), z=half_yaw.sin(), w=half_yaw.cos()),
+        ),
+    ).struct.json_encode()
+    oracle_fix = pl.struct(
+        timestamp=stamp,
+        frame_id=pl.lit(vehicle),
+        latitude=pl.col("NAV_LAT"),
+        longitude=pl.col("NAV_LONG"),
+        altitude=pl.lit(0.0),
+        position_covariance=pl.lit(pl.Series([[0.0] * 9])),
+        position_covariance_type=pl.lit(0),
+    ).struct.json_encode()
+    for derived, oracle in ((poses(nav), oracle_pose), (locations(nav, vehicle), oracle_fix)):
+        assert derived.rows.height > 300
+        got = derived.frame()["data"].to_list()
+        assert got == derived.rows.select(oracle).to_series().to_list()
+        assert all(isinstance(json.loads(text), dict) for text in got)
+
+
+def test_derived_channels_in_slices_and_the_same_file_every_time(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    # A long derived channel is written in slices by the workers; the file never depends on
+    # the threads' timing, and slicing changes only where chunks end.
+    import fleetlog.export.tomcap as tomcap
+
+    whole, again, sliced = tmp_path / "a.mcap", tmp_path / "b.mcap", tmp_path / "c.mcap"
+    export([IVP, THEMOOS], whole)
+    export([IVP, THEMOOS], again)
+    assert whole.read_bytes() == again.read_bytes()
+    monkeypatch.setattr(tomcap, "_SLICE", 1)
+    export([IVP, THEMOOS], sliced)
+    assert messages(sliced) == messages(whole)

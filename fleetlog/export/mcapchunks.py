@@ -1,0 +1,215 @@
+"""A batch of messages as MCAP chunks: sorted by time, cut by size, indexed, assembled.
+
+A batch (columns ``channel``, ``log_time``, ``data``) is sorted by log time (stable; skipped
+when it is sorted already, the common case), cut into chunks of about ``chunk_size``
+uncompressed bytes, and each chunk's Message records are assembled into one buffer with its
+Message Index records (per channel, in channel order, (log time, offset) in time order).
+
+Two ways to assemble, giving the same bytes (a test holds it):
+
+* with numpy (an optional accelerator): headers written as one structured array; where each
+  header and each message's data go is one boolean mask made by ``numpy.repeat`` of the
+  records' lengths, so both are copied by two masked assignments; the indexes are a stable
+  argsort of each chunk's channels. No Python object per message.
+* without it: the headers packed by one precompiled :class:`struct.Struct` mapped over the
+  batch and joined with the data (a loop in C, still a few Python objects per message).
+
+Chunks are built here, in a worker thread of :class:`~fleetlog.export.mcapfile.McapWriter`;
+compressing and placing them in the file is the writer's.
+"""
+
+from __future__ import annotations
+
+import struct
+from dataclasses import dataclass
+from itertools import chain, pairwise, repeat
+from typing import TYPE_CHECKING, Any
+
+from fleetlog.export.mcaprecords import MESSAGE_FIXED, OP_MESSAGE, message_index
+
+if TYPE_CHECKING:
+    import polars as pl
+
+__all__ = ["Chunk", "build_chunks"]
+
+_MESSAGE = struct.Struct("<BQHIQQ")  # opcode, length, channel, sequence, log and publish time
+_RECORD_FIXED = MESSAGE_FIXED + 9  # a message record's bytes before its data
+#: The message record's fixed part as a numpy structured type (packed, like _MESSAGE).
+_HEADER_FIELDS = [
+    ("op", "u1"),
+    ("length", "<u8"),
+    ("channel", "<u2"),
+    ("sequence", "<u4"),
+    ("log_time", "<u8"),
+    ("publish_time", "<u8"),
+]
+
+
+@dataclass
+class Chunk:
+    """One chunk's uncompressed records and its message indexes.
+
+    Attributes:
+        start: the earliest log time in it.
+        end: the latest.
+        records: its Message records, back to back.
+        indexes: the Message Index record of each channel in it, in channel order.
+        counts: messages per channel.
+    """
+
+    start: int
+    end: int
+    records: bytes | memoryview
+    indexes: dict[int, bytes]
+    counts: dict[int, int]
+
+
+def _prepared(batch: pl.DataFrame) -> pl.DataFrame:
+    import polars as pl
+
+    frame = batch.select(
+        pl.col("channel").cast(pl.UInt16),
+        pl.col("log_time").cast(pl.UInt64),
+        "data",
+    )
+    if not frame["log_time"].is_sorted():
+        frame = frame.sort("log_time", maintain_order=True)
+    return frame
+
+
+def _text(data: pl.Series) -> pl.Series | None:
+    """The data as UTF-8 text, or None (bytes that are not: the pure path copes)."""
+    import polars as pl
+
+    if data.dtype == pl.String:
+        return data
+    try:
+        return data.cast(pl.String)
+    except pl.exceptions.PolarsError:
+        return None
+
+
+def build_chunks(batch: pl.DataFrame, first: int, chunk_size: int, numpy: Any) -> list[Chunk]:
+    """The batch's messages as chunks (``numpy`` the module, or None for the pure path).
+
+    Args:
+        batch: columns ``channel`` (UInt16), ``log_time`` (UInt64 ns), ``data`` (String or
+            Binary); publish time is the log time.
+        first: the sequence number of the batch's first message (in time order).
+        chunk_size: uncompressed message bytes per chunk (a chunk ends after the message
+            that crosses it).
+        numpy: the numpy module to assemble with, or None.
+    """
+    frame = _prepared(batch)
+    if numpy is not None:
+        text = _text(frame["data"])
+        if text is not None:
+            return _with_numpy(frame, text, first, chunk_size, numpy)
+    return _pure(frame, first, chunk_size)
+
+
+def _with_numpy(
+    frame: pl.DataFrame, text: pl.Series, first: int, chunk_size: int, np: Any
+) -> list[Chunk]:
+    import polars as pl
+
+    n = frame.height
+    blob = text.str.join("").cast(pl.Binary).item()
+    size = text.str.len_bytes().to_numpy().astype(np.int64) + _RECORD_FIXED
+    at = np.cumsum(size) - size
+    channels = frame["channel"].to_numpy()
+    times = frame["log_time"].to_numpy()
+    heads = np.zeros(n, dtype=np.dtype(_HEADER_FIELDS))
+    heads["op"] = OP_MESSAGE
+    heads["length"] = size - 9
+    heads["channel"] = channels
+    heads["sequence"] = np.arange(first, first + n, dtype="<u8") & 0xFFFFFFFF
+    heads["log_time"] = times
+    heads["publish_time"] = times
+    # Which bytes are data: header and data lengths alternate, so one repeat gives the mask.
+    lengths = np.empty(2 * n, dtype=np.int64)
+    lengths[0::2] = _RECORD_FIXED
+    lengths[1::2] = size - _RECORD_FIXED
+    is_data = np.repeat(np.tile(np.array([False, True]), n), lengths)
+    out = np.empty(is_data.size, dtype=np.uint8)
+    out[is_data] = np.frombuffer(blob, dtype=np.uint8)
+    out[~is_data] = heads.view(np.uint8)
+    part = at // chunk_size
+    bounds = [0, *(np.flatnonzero(part[1:] != part[:-1]) + 1).tolist(), n]
+    chunks = []
+    for lo, hi in pairwise(bounds):
+        begin = int(at[lo])
+        stop = int(at[hi - 1] + size[hi - 1])
+        mine = channels[lo:hi]
+        order = np.argsort(mine, kind="stable")
+        pairs = np.empty((hi - lo, 2), dtype="<u8")
+        pairs[:, 0] = times[lo:hi][order]
+        pairs[:, 1] = (at[lo:hi] - begin)[order]
+        cids, starts, counts = np.unique(mine[order], return_index=True, return_counts=True)
+        indexes: dict[int, bytes] = {}
+        per_channel: dict[int, int] = {}
+        for cid, i, k in zip(cids.tolist(), starts.tolist(), counts.tolist(), strict=True):
+            indexes[cid] = message_index(cid, pairs[i : i + k].tobytes())
+            per_channel[cid] = k
+        chunks.append(
+            Chunk(
+                int(times[lo]),
+                int(times[hi - 1]),
+                memoryview(out[begin:stop]),
+                indexes,
+                per_channel,
+            )
+        )
+    return chunks
+
+
+def _pure(frame: pl.DataFrame, first: int, chunk_size: int) -> list[Chunk]:
+    import polars as pl
+
+    frame = (
+        frame.with_columns(pl.col("data").cast(pl.Binary))
+        .with_columns(size=(pl.col("data").bin.size() + _RECORD_FIXED).cast(pl.UInt64))
+        .with_columns(at=pl.col("size").cum_sum() - pl.col("size"))
+        .with_columns(part=(pl.col("at") // chunk_size).rle_id())
+        .with_columns(offset=pl.col("at") - pl.col("at").min().over("part"))
+    )
+    ordered = frame.select("part", "channel", "log_time", "offset").sort(
+        "part", "channel", maintain_order=True
+    )
+    runs = ordered.group_by("part", "channel", maintain_order=True).len().rows()
+    pairs = ordered.select(pl.concat_list("log_time", "offset").explode()).to_series().to_list()
+    sizes = frame.group_by("part", maintain_order=True).agg(
+        pl.len(), pl.col("log_time").first().alias("start"), pl.col("log_time").last()
+    )
+    channels = frame["channel"].to_list()
+    times = frame["log_time"].to_list()
+    datas = frame["data"].to_list()
+    lengths = (frame["size"] - 9).to_list()  # a message record's content length
+    chunks = []
+    row = pair = run = 0
+    for part, count, start, end in sizes.rows():
+        indexes: dict[int, bytes] = {}
+        per_channel: dict[int, int] = {}
+        while run < len(runs) and runs[run][0] == part:
+            _, cid, k = runs[run]
+            run += 1
+            values = pairs[2 * pair : 2 * (pair + k)]
+            indexes[cid] = message_index(cid, struct.pack(f"<{2 * k}Q", *values))
+            per_channel[cid] = k
+            pair += k
+        rows = slice(row, row + count)
+        sequences = (s & 0xFFFFFFFF for s in range(first + row, first + row + count))
+        # map() and join() run the per-message loop in C: no Python bytecode per message.
+        heads = map(
+            _MESSAGE.pack,
+            repeat(OP_MESSAGE),
+            lengths[rows],
+            channels[rows],
+            sequences,
+            times[rows],
+            times[rows],
+        )
+        records = b"".join(chain.from_iterable(zip(heads, datas[rows], strict=True)))
+        chunks.append(Chunk(start, end, records, indexes, per_channel))
+        row += count
+    return chunks
