@@ -11,8 +11,10 @@ Entries are read with the columnar reader (:class:`~fleetlog.storage.columnar.Al
 what was skipped), in file order, as the low-level reader keeps them. The filter runs before
 values are typed: globs are matched once per distinct variable and source (a few hundred in a
 log of millions of lines) with the linear-time matcher, and rows are kept by set membership
-in Rust. The recorder's process serves greps, so blocks are small (:data:`GREP_BLOCK`): no
-step holds the GIL for long and recording never waits on a grep.
+in Rust, and the matches are written as JSON lines by one string kernel a block
+(:func:`_record_lines`), not one Python object per record. The recorder's process serves
+greps, so blocks are small (:data:`GREP_BLOCK`): no step holds the GIL for long and
+recording never waits on a grep.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ import json
 import threading
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from fleetlog.errors import StorageError
 from fleetlog.storage.columnar import AlogReader, Batch
@@ -34,10 +37,15 @@ from fleetlog.wire.query import (
     encode_grep_line,
 )
 
+if TYPE_CHECKING:
+    import polars as pl
+
 __all__ = ["GREP_BLOCK", "EntryFilter", "run_grep"]
 
-#: Decompressed bytes parsed per step in the recorder's process (about 13k lines).
-GREP_BLOCK = 1 << 20
+#: Decompressed bytes parsed per step in the recorder's process (about 26k lines). Each block
+#: costs ~5 ms of fixed work besides its lines: 1 MiB blocks took 1.05 CPU s for a 77 MB log,
+#: 2 MiB 0.87, 4 MiB 0.73, for +20 and +55 MiB of peak memory a grep (docs/bench.md §9.2).
+GREP_BLOCK = 2 << 20
 _KIND = {"double": "d", "string": "s", "binary": "b"}
 _COLUMNS = ("line", "offset", "var", "source", "type", "text")
 
@@ -79,12 +87,18 @@ def _json_numbers(values: list[float] | list[int]) -> list[str]:
     return _ENCODE(values)[1:-1].split(",")
 
 
-def _record_lines(batch: Batch) -> list[bytes]:
-    """Encode a batch of matches as grep record lines (what encode_grep_line writes)."""
+#: Characters JSON (ASCII) writes escaped: a value holding none is its own JSON text.
+_ESCAPED = r'[^\x20-\x7e]|["\\]'
+
+
+def _python_lines(batch: Batch) -> list[str]:
+    """Encode a batch of matches as grep record lines, one Python object per field."""
     if not batch.exact:
         kinds = batch.frame["type"].to_list()
         return [
-            encode_grep_line(GrepRecord(e.offset, e.key, e.source, _KIND[kind], e.text, e.lineno))
+            encode_grep_line(
+                GrepRecord(e.offset, e.key, e.source, _KIND[kind], e.text, e.lineno)
+            ).decode("ascii")
             for e, kind in zip(batch.entries(), kinds, strict=True)
         ]
     frame = batch.frame
@@ -95,9 +109,84 @@ def _record_lines(batch: Batch) -> list[bytes]:
     lines = _json_numbers(frame["line"].to_list())
     kinds = [_KIND[kind] for kind in frame["type"].to_list()]
     return [
-        f'[{o},"{k}","{s}","{t}","{x}",{n}]\n'.encode("ascii")
+        f'[{o},"{k}","{s}","{t}","{x}",{n}]\n'
         for o, k, s, t, x, n in zip(offsets, keys, sources, kinds, texts, lines, strict=True)
     ]
+
+
+def _record_lines(batch: Batch) -> pl.Series:
+    """A batch of matches as grep record lines (ASCII text): what encode_grep_line writes.
+
+    Written by one polars string kernel where a field's text is already its JSON (names,
+    sources and values with no character JSON escapes; times from 1e-4 to 1e16, where
+    polars and Python write a float alike): no Python object per record, so neither the
+    time nor the GIL a block takes grows with its matches. The other rows (rare) are
+    encoded in Python, as before, and put in their place.
+    """
+    import polars as pl
+
+    frame = batch.frame
+    if not batch.exact or not frame.height:
+        return pl.Series("r", _python_lines(batch), dtype=pl.String)
+    col = pl.col
+    size = col("offset").abs()
+    plain = (col("offset") == 0) | ((size >= 1e-4) & (size < 1e16))
+    for name in ("var", "source", "text"):
+        plain = plain & col(name).is_not_null() & ~col(name).str.contains(_ESCAPED)
+    kind = (
+        pl.when(col("type") == "double")
+        .then(pl.lit("d"))
+        .when(col("type") == "string")
+        .then(pl.lit("s"))
+        .otherwise(pl.lit("b"))
+    )
+    text = pl.concat_str(
+        pl.lit("["),
+        col("offset").cast(pl.String),
+        pl.lit(',"'),
+        col("var"),
+        pl.lit('","'),
+        col("source"),
+        pl.lit('","'),
+        kind,
+        pl.lit('","'),
+        col("text"),
+        pl.lit('",'),
+        col("line").cast(pl.String),
+        pl.lit("]\n"),
+    )
+    out = frame.select(text.alias("r"), plain.alias("plain"))
+    if out["plain"].all():
+        return out["r"]
+    others = out["plain"].not_().arg_true()
+    rest = Batch(frame[others], True, frame[others])
+    return out["r"].scatter(others, _python_lines(rest))
+
+
+def _fill(lines: pl.Series, chunk: list[bytes], size: int, emit: Callable[[bytes], None]) -> int:
+    """Add lines to the reply being built, sending it each time it reaches REPLY_TARGET.
+
+    The replies end after the same lines as adding the lines one by one would (the first
+    that brings the reply to the target), found by a binary search of the running sizes.
+    Returns the size of the reply left unsent.
+    """
+    import polars as pl
+
+    n = lines.len()
+    ends = lines.str.len_bytes().cast(pl.Int64).cum_sum()
+    start = base = 0
+    while start < n:
+        at = int(ends.search_sorted(base + REPLY_TARGET - size, side="left"))
+        if at >= n:
+            chunk.append(lines.slice(start).str.join("").cast(pl.Binary).item())
+            return size + int(ends[n - 1]) - base
+        chunk.append(lines.slice(start, at + 1 - start).str.join("").cast(pl.Binary).item())
+        emit(b"".join(chunk))
+        chunk.clear()
+        size = 0
+        base = int(ends[at])
+        start = at + 1
+    return size
 
 
 def run_grep(
@@ -140,12 +229,7 @@ def run_grep(
             if batch.height > room:
                 batch = batch.head(room)
                 truncated = True
-            for line in _record_lines(batch):
-                chunk.append(line)
-                size += len(line)
-                if size >= REPLY_TARGET:
-                    emit(b"".join(chunk))
-                    chunk, size = [], 0
+            size = _fill(_record_lines(batch), chunk, size, emit)
             matched += batch.height
             if truncated:
                 break
