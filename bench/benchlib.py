@@ -164,8 +164,12 @@ class Helper:
 class RecorderProcess:
     """``fleetlog record`` without a mission, as a subprocess in its own directory."""
 
-    def __init__(self, workdir: Path, port: int, extra: Sequence[str] = ()) -> None:
+    def __init__(
+        self, workdir: Path, port: int, extra: Sequence[str] = (), tree: Path | None = None
+    ) -> None:
+        """``tree``: run fleetlog from that source tree (``PYTHONPATH``: a before/after pair)."""
         self.workdir = workdir
+        env = None if tree is None else {**os.environ, "PYTHONPATH": str(tree)}
         self.proc = subprocess.Popen(
             [
                 sys.executable,
@@ -180,6 +184,7 @@ class RecorderProcess:
                 *extra,
             ],
             cwd=workdir,
+            env=env,
             stderr=subprocess.PIPE,
             stdout=subprocess.DEVNULL,
             text=True,

@@ -2,6 +2,9 @@
 
 In each round, one after the other:
 
+* a bare zenoh-python subscriber (one FIFO, ``try_recv() or recv()``, counting only) fed the
+  same traffic by the same publisher: Zenoh's own cost per message, which any Zenoh-based
+  recorder pays;
 * ``fleetlog record`` (default configuration) while a publisher process (fleetlog's
   ``MoosPublisher``, BLOCK) puts N doubles on one variable, as fast as it can (``--rate 0``)
   or at ``--rate`` messages/s; the figure is the recorder process's CPU (every thread:
@@ -19,6 +22,9 @@ CPU is read from ``/proc/PID/task/*/schedstat``. Each figure is CPU-seconds per 
 messages: median [min–max] over the rounds, with the load average beside it::
 
     MOOS_BIN=/path/to/core-moos/build/bin python bench/recorder_cpu.py -n 100000 --rounds 3
+
+``--also TREE`` adds, in each round, the same fleetlog round run from another source tree
+(``PYTHONPATH=TREE``), for a before/after pair in one run.
 """
 
 from __future__ import annotations
@@ -75,9 +81,9 @@ def wait_lines(
     return count
 
 
-def fleetlog_round(n: int, rate: float, work: Path) -> dict[str, float]:
+def fleetlog_round(n: int, rate: float, work: Path, tree: Path | None = None) -> dict[str, float]:
     port = free_port()
-    rec = RecorderProcess(work, port)
+    rec = RecorderProcess(work, port, tree=tree)
     pub = Helper(
         "publisher",
         ["--connect", f"tcp/127.0.0.1:{port}", "-n", str(n), "--keys", "1", "--rate", str(rate)],
@@ -98,6 +104,29 @@ def fleetlog_round(n: int, rate: float, work: Path) -> dict[str, float]:
     if not got:
         raise RuntimeError(f"the recorder did not log {END}: {summary}")
     return {"fleetlog": used / 1e9 * 1e5 / n, "fleetlog_wall": wall, "summary_lost": 0.0}
+
+
+def bare_round(n: int, rate: float) -> dict[str, float]:
+    """The same traffic into a bare zenoh-python subscriber that only counts (Zenoh's own cost)."""
+    port = free_port()
+    counter = Helper("counter", ["--listen", f"tcp/127.0.0.1:{port}", "-n", str(n + 1)])
+    counter.read()
+    pub = Helper(
+        "publisher",
+        ["--connect", f"tcp/127.0.0.1:{port}", "-n", str(n), "--keys", "1", "--rate", str(rate)],
+    )
+    try:
+        pub.read()
+        time.sleep(0.5)
+        before = cpu_ns(counter.proc.pid)
+        pub.send("go")
+        counter.read()  # every sample and the end marker counted
+        used = cpu_ns(counter.proc.pid) - before
+        pub.read()
+    finally:
+        pub.finish()
+        counter.finish()
+    return {"bare": used / 1e9 * 1e5 / n}
 
 
 def plogger_round(n: int, rate: float, moos_bin: Path, tick: int, work: Path) -> dict[str, float]:
@@ -130,6 +159,9 @@ def main() -> int:
     parser.add_argument("--rate", type=float, default=0.0, help="msg/s; 0: a burst")
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--plogger-tick", type=int, default=50, help="pLogger's AppTick")
+    parser.add_argument(
+        "--also", type=Path, help="a second fleetlog source tree, run in each round (before/after)"
+    )
     args = parser.parse_args()
     folder = os.environ.get("MOOS_BIN", "")
     moos_bin = Path(folder) if folder and (Path(folder) / "pLogger").is_file() else None
@@ -139,8 +171,12 @@ def main() -> int:
     loads: list[float] = []
     for _ in range(args.rounds):
         loads.append(os.getloadavg()[0])
+        row = bare_round(args.n, args.rate)
         with tempfile.TemporaryDirectory(prefix="fleetlog-cpu-") as tmp:
-            row = fleetlog_round(args.n, args.rate, Path(tmp))
+            row.update(fleetlog_round(args.n, args.rate, Path(tmp)))
+        if args.also is not None:
+            with tempfile.TemporaryDirectory(prefix="fleetlog-cpu-also-") as tmp:
+                row["also"] = fleetlog_round(args.n, args.rate, Path(tmp), args.also)["fleetlog"]
         if moos_bin is not None:
             with tempfile.TemporaryDirectory(prefix="fleetlog-cpu-moos-") as tmp:
                 row.update(plogger_round(args.n, args.rate, moos_bin, args.plogger_tick, Path(tmp)))
@@ -156,6 +192,13 @@ def main() -> int:
         f"load {spread(loads, '{:.1f}')} (load at {loadavg()} now)"
     )
     print(f"  fleetlog record     {spread(col('fleetlog'), '{:.3f}')}")
+    print(f"  bare subscriber     {spread(col('bare'), '{:.3f}')} (Zenoh's own cost)")
+    added = [r["fleetlog"] - r["bare"] for r in rounds]
+    print(f"  fleetlog - bare     {spread(added, '{:.3f}')} (what recording adds)")
+    if args.also is not None:
+        print(f"  the same, {args.also}  {spread(col('also'), '{:.3f}')}")
+        ratios = [r["also"] / r["fleetlog"] for r in rounds]
+        print(f"  {args.also} / this tree: {spread(ratios, '{:.2f}')}x")
     if moos_bin is not None:
         both = [r["pLogger"] + r["MOOSDB"] for r in rounds]
         print(f"  pLogger             {spread(col('pLogger'), '{:.3f}')}")

@@ -77,9 +77,11 @@ def run_bare(rate: float, n: int, keys: int) -> dict[str, float]:
     return figures(got["latencies"])
 
 
-def run_recorder(rate: float, n: int, keys: int, workdir: Path, poll: float) -> dict[str, float]:
+def run_recorder(
+    rate: float, n: int, keys: int, workdir: Path, poll: float, tree: Path | None = None
+) -> dict[str, float]:
     port = free_port()
-    rec = RecorderProcess(workdir, port)
+    rec = RecorderProcess(workdir, port, tree=tree)
     names = {name.encode() for name in key_names(keys)}
     marker = END.encode()
     latencies: list[float] = []
@@ -129,6 +131,9 @@ def main() -> int:
     parser.add_argument("--keys", type=int, default=4)
     parser.add_argument("--rounds", type=int, default=3)
     parser.add_argument("--poll", type=float, default=0.0005, help="alog poll interval (s)")
+    parser.add_argument(
+        "--also", type=Path, help="the recorder also from this source tree (before/after)"
+    )
     args = parser.parse_args()
     rates = [float(r) for r in args.rates.split(",")]
     print(
@@ -160,11 +165,23 @@ def main() -> int:
                     f"{rec['steal']:.0%} stolen)",
                     flush=True,
                 )
+                if args.also is not None:
+                    alsodir = Path(tmp) / f"r{r}-{int(rate)}-also"
+                    alsodir.mkdir()
+                    also = run_recorder(rate, n, args.keys, alsodir, args.poll, args.also)
+                    results.setdefault((rate, "also"), []).append(also)
+                    print(
+                        f"  round {r + 1} {rate:>8,.0f}/s: --also p50 {also['p50']:.3f} "
+                        f"p99 {also['p99']:.3f} max {also['max']:.2f} ms",
+                        flush=True,
+                    )
     print()
     print("latency in ms, median [min–max] over rounds:")
     print(f"  {'rate':>8}  {'':9} {'p50':<22} {'p99':<22} {'max':<22}")
     for rate in rates:
-        for who, label in (("bare", "bare sub"), ("rec", "recorder")):
+        for who, label in (("bare", "bare sub"), ("rec", "recorder"), ("also", "--also")):
+            if (rate, who) not in results:
+                continue
             rows = results[(rate, who)]
             cells = [spread([x[q] for x in rows], "{:.2f}") for q in ("p50", "p99", "max")]
             print(f"  {rate:>8,.0f}  {label:9} {cells[0]:<22} {cells[1]:<22} {cells[2]:<22}")
@@ -175,6 +192,8 @@ def main() -> int:
         over = spread([x["over"] * 100 for x in rec_rows], "{:.2f}")
         print(f"  {'':8}  recorder lines over 20 ms: {over} %")
     worst = max(x["max"] for (_, who), rows in results.items() if who == "rec" for x in rows)
+    if args.also is not None:
+        print(f"  --also: {args.also}")
     print(f"every line flushed within 20 ms of publishing: {'yes' if ok else 'NO'}", end="")
     print(f" (worst {worst:.2f} ms)")
     return 0 if ok else 1

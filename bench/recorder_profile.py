@@ -158,6 +158,7 @@ def run_service(args: argparse.Namespace) -> int:
         thread.start()
         service.ready.wait(30)
         args_pub = ["--connect", f"tcp/127.0.0.1:{port}", "-n", str(n), "--keys", str(keys)]
+        args_pub += ["--rate", str(args.rate)]
         pub = Helper("publisher", [*args_pub, "--raw"] if args.raw else args_pub)
         try:
             pub.read()
@@ -200,6 +201,7 @@ def main() -> int:
     parser.add_argument("--profile", action="store_true", help="cProfile the lane")
     parser.add_argument("--service", action="store_true", help="profile a RecorderService")
     parser.add_argument("--raw", action="store_true", help="--service: pre-encoded zenoh puts")
+    parser.add_argument("--rate", type=float, default=0.0, help="--service: msg/s (0: flat out)")
     args = parser.parse_args()
     if args.service:
         return run_service(args)

@@ -18,6 +18,7 @@ figures are the median [min–max] over rounds, ratios are taken within each rou
 
     python bench/recorder_rate.py                 # 200k samples, 4 keys, 3 rounds
     python bench/recorder_rate.py -n 100000 --rounds 5
+    python bench/recorder_rate.py --only bare --only recorder --also /path/to/old/tree
 """
 
 from __future__ import annotations
@@ -98,10 +99,12 @@ def run_format(n: int, keys: int, workdir: Path) -> dict[str, float]:
     return {"rate": n / elapsed}
 
 
-def run_recorder(n: int, keys: int, workdir: Path, raw: bool) -> dict[str, object]:
+def run_recorder(
+    n: int, keys: int, workdir: Path, raw: bool, tree: Path | None = None
+) -> dict[str, object]:
     """(c) ``fleetlog record`` as a subprocess, tailing its alog for the end marker."""
     port = free_port()
-    rec = RecorderProcess(workdir, port)
+    rec = RecorderProcess(workdir, port, tree=tree)
     pub: Helper | None = None
     try:
         tail = Tail(rec.alog)
@@ -150,8 +153,13 @@ def main() -> int:
     parser.add_argument(
         "--only", choices=("bare", "format", "recorder"), action="append", help="run only these"
     )
+    parser.add_argument(
+        "--also", type=Path, help="(c) also from this source tree, in each round (before/after)"
+    )
     args = parser.parse_args()
     which = args.only or ["bare", "format", "recorder"]
+    if args.also is not None:
+        which.append("also")
     n, keys = args.n, args.keys
     feed = "pre-encoded zenoh puts" if args.raw else "MoosPublisher"
     print(
@@ -170,14 +178,15 @@ def main() -> int:
                 elif w == "format":
                     res = dict(run_format(n, keys, workdir))
                 else:
-                    rundir = workdir / f"rec{r}"
+                    rundir = workdir / f"{w}{r}"
                     rundir.mkdir()
-                    res = run_recorder(n, keys, rundir, args.raw)
+                    tree = args.also if w == "also" else None
+                    res = run_recorder(n, keys, rundir, args.raw, tree)
                     if not res["loss_free"]:
                         ok = False
                 results[w].append(res)
                 extra = ""
-                if w == "recorder":
+                if w in ("recorder", "also"):
                     verdict = "loss-free" if res["loss_free"] else f"LOSS: {res['summary']}"
                     extra = f" ({verdict})"
                 line.append(f"{w} {res['rate']:,.0f}/s{extra}")
@@ -197,8 +206,12 @@ def main() -> int:
         free = all(bool(x["loss_free"]) for x in results["recorder"])
         print(f"  (c) fleetlog record        {spread(rates('recorder'))}", end="")
         print("  loss-free in every run" if free else "  LOSS in some run")
+    if "also" in which:
+        print(f"  (c) from {args.also}  {spread(rates('also'))}")
     if "bare" in which:
-        for w, label in (("recorder", "recorder / bare"), ("format", "format / bare")):
+        pairs = [("recorder", "recorder / bare"), ("format", "format / bare")]
+        pairs.append(("also", "(c) from --also / bare"))
+        for w, label in pairs:
             if w in which:
                 ratios = [a / b for a, b in zip(rates(w), rates("bare"), strict=True)]
                 print(f"  {label:<26} {spread(ratios, '{:.2f}')}×")
