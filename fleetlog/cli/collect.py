@@ -25,7 +25,15 @@ from fleetlog.cli.options import (
     Root,
     checked_seconds,
 )
-from fleetlog.cli.shore import WAIT, Expect, Wait, checked_expect, open_client
+from fleetlog.cli.shore import (
+    WAIT,
+    Expect,
+    MinFreeDisk,
+    Wait,
+    checked_expect,
+    checked_min_free,
+    open_client,
+)
 from fleetlog.cli.tables import console, human_size, human_time, plain
 from fleetlog.errors import QueryError, UsageError
 from fleetlog.shore.collect import CollectOptions, Collector
@@ -197,6 +205,7 @@ def collect(
             help="How long a transfer rides out a vehicle that stopped answering.",
         ),
     ] = 30.0,
+    min_free_disk: MinFreeDisk = "512MiB",
     expect: Expect = None,
     wait: Wait = WAIT,
     root: Root = "fleet",
@@ -233,6 +242,7 @@ def collect(
         poll=poll,
         rescan=rescan,
         retry_for=retry_for,
+        min_free=checked_min_free(min_free_disk),
     )
     stop = threading.Event()
     notifier = Notifier()

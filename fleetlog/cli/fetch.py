@@ -32,7 +32,17 @@ from fleetlog.cli.options import (
     checked_seconds,
     checked_vehicle,
 )
-from fleetlog.cli.shore import WAIT, Expect, Wait, discover, finish, open_client, warn
+from fleetlog.cli.shore import (
+    WAIT,
+    Expect,
+    MinFreeDisk,
+    Wait,
+    checked_min_free,
+    discover,
+    finish,
+    open_client,
+    warn,
+)
 from fleetlog.cli.tables import err_console, human_size
 from fleetlog.errors import FleetlogError, FormatError, QueryError, UsageError
 from fleetlog.shore import fetch as fetching
@@ -254,6 +264,7 @@ def fetch(
             " the vehicle.",
         ),
     ] = None,
+    min_free_disk: MinFreeDisk = "512MiB",
     expect: Expect = None,
     wait: Wait = WAIT,
     root: Root = "fleet",
@@ -291,6 +302,7 @@ def fetch(
         msg = f"--rate must be a positive number of MB/s, not {rate:g}"
         raise UsageError(msg)
     checked_seconds(retry_for, "--retry-for")
+    min_free = checked_min_free(min_free_disk)
     if expect and not every:
         msg = "--expect names the vehicles --all should find; fetch VEHICLE waits for VEHICLE"
         raise UsageError(msg)
@@ -342,6 +354,7 @@ def fetch(
                     retry_for=retry_for,
                     cancel=cancel,
                     server=target.server,
+                    min_free=min_free,
                 )
             try:
                 results = _collect(futures)

@@ -14,11 +14,23 @@ from typing import Annotated
 import typer
 
 from fleetlog.cli.options import checked_root, checked_seconds, checked_vehicle, session_options
+from fleetlog.errors import FormatError, UsageError
+from fleetlog.moos.units import parse_size
 from fleetlog.shore.client import FleetClient
 from fleetlog.shore.discovery import WAIT, FleetView
 from fleetlog.shore.report import FleetReport
 
-__all__ = ["WAIT", "Expect", "Wait", "discover", "finish", "open_client", "warn"]
+__all__ = [
+    "WAIT",
+    "Expect",
+    "MinFreeDisk",
+    "Wait",
+    "checked_min_free",
+    "discover",
+    "finish",
+    "open_client",
+    "warn",
+]
 
 _DISCOVERY = "Discovery"
 
@@ -42,6 +54,29 @@ Wait = Annotated[
         rich_help_panel=_DISCOVERY,
     ),
 ]
+
+
+MinFreeDisk = Annotated[
+    str,
+    typer.Option(
+        "--min-free-disk",
+        metavar="SIZE",
+        help="Leave SIZE free where the files go (1GB; 0: no check): a file that would go"
+        " below is not fetched, and what is fetched so far is kept.",
+    ),
+]
+
+
+def checked_min_free(text: str) -> int:
+    """Read ``--min-free-disk``.
+
+    Raises:
+        UsageError: not a size.
+    """
+    try:
+        return parse_size(text, name="--min-free-disk")
+    except FormatError as err:
+        raise UsageError(str(err)) from None
 
 
 def open_client(

@@ -12,6 +12,7 @@ from rich.console import Console
 from rich.table import Table
 from rich.text import Text
 
+from fleetlog.moos.units import human_size
 from fleetlog.wire.query import LatestInfo, SessionInfo
 
 __all__ = [
@@ -49,16 +50,6 @@ def plain(text: str, style: str = "") -> Text:
     """
     shown = "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
     return Text(shown, style=style)
-
-
-def human_size(size: int) -> str:
-    """``1536`` → ``1.5 KiB``."""
-    value = float(size)
-    for unit in ("B", "KiB", "MiB", "GiB"):
-        if value < 1024 or unit == "GiB":
-            return f"{value:.0f} {unit}" if unit == "B" else f"{value:.1f} {unit}"
-        value /= 1024
-    return f"{value:.1f} TiB"  # pragma: no cover - the loop returns
 
 
 #: a duration longer than this is not a log's (a hostile or garbled reply): shown as ``-``

@@ -18,7 +18,7 @@ import re
 
 from fleetlog.errors import FormatError
 
-__all__ = ["MAX_DURATION", "MAX_SIZE", "parse_duration", "parse_size"]
+__all__ = ["MAX_DURATION", "MAX_SIZE", "human_size", "parse_duration", "parse_size"]
 
 #: the largest size read: 1 PB (a larger value is a typo, not a plan)
 MAX_SIZE = 10**15
@@ -113,3 +113,13 @@ def parse_duration(text: str, *, name: str = "duration") -> float:
         msg = f"{name} {text.strip()!r} is too long: at most a year"
         raise FormatError(msg)
     return value
+
+
+def human_size(size: int) -> str:
+    """``1536`` → ``1.5 KiB`` (binary units, one decimal)."""
+    value = float(size)
+    for unit in ("B", "KiB", "MiB", "GiB"):
+        if value < 1024 or unit == "GiB":
+            return f"{value:.0f} {unit}" if unit == "B" else f"{value:.1f} {unit}"
+        value /= 1024
+    return f"{value:.1f} TiB"  # pragma: no cover - the loop returns

@@ -45,6 +45,7 @@ from fleetlog.storage.archive import (
     ArchiveLock,
     check_vehicle_dir,
 )
+from fleetlog.storage.reserve import DEFAULT_SHORE_RESERVE
 
 __all__ = ["CollectOptions", "CollectReport", "Collector"]
 
@@ -69,6 +70,8 @@ class CollectOptions:
         retry_for: seconds a fetch rides out a vehicle that stopped answering.
         target_delay: the extra delay (seconds) transfers may add to the link's round trip.
         source: how acknowledgements name the collector.
+        min_free: bytes left free on the archive's disk: a transfer that would go below
+            stops (the vehicle's round fails, said, and is retried with the others).
     """
 
     max_rate: float | None = None
@@ -81,6 +84,7 @@ class CollectOptions:
     retry_for: float = 30.0
     target_delay: float = 0.1
     source: str = "fleetlog collect"
+    min_free: int = DEFAULT_SHORE_RESERVE
 
 
 @dataclass

@@ -298,6 +298,7 @@ class VehicleWorker:
                 pacer=self.pacer,
                 limits=self.limits,
                 names=None if names is None else frozenset(names),
+                min_free=c.options.min_free,
             )
         finally:
             with self._busy_lock:

@@ -37,6 +37,7 @@ from fleetlog.errors import QueryError
 from fleetlog.shore.client import FleetClient
 from fleetlog.shore.pacing import FixedPacer, Pacer, RateLimit
 from fleetlog.shore.transfer import FileOutcome, FileTransfer, Progress, TransferContext, riding_out
+from fleetlog.storage.reserve import DEFAULT_SHORE_RESERVE, DiskReserve
 from fleetlog.wire.query import DEFAULT_RANGE, SessionInfo, check_component
 from fleetlog.wire.session_meta import CLOSED, CUT
 
@@ -97,6 +98,7 @@ def fetch_session(
     pacer: Pacer | None = None,
     limits: Sequence[RateLimit] = (),
     names: Collection[str] | None = None,
+    min_free: int = DEFAULT_SHORE_RESERVE,
 ) -> FetchOutcome:
     """Download a session of a vehicle into ``out_dir/<session>/``.
 
@@ -121,6 +123,8 @@ def fetch_session(
         names: fetch only these files of the session (default: every file). Files go
             smallest first, so a session's ylog, slog, mission copy and metadata arrive
             before its alog.
+        min_free: bytes to leave free on the file system of ``out_dir`` (0: no check); a
+            file that would go below is not fetched (StorageError, the rest kept).
 
     Returns:
         What was fetched.
@@ -128,7 +132,8 @@ def fetch_session(
     Raises:
         QueryError: the vehicle refused a request, or stopped answering for ``retry_for``
             seconds; the files fetched so far are kept for the next run.
-        StorageError: the local files cannot be written.
+        StorageError: the local files cannot be written, or the disk is down to
+            ``min_free``.
     """
     check_component(session, "session")
     started = time.monotonic()
@@ -143,6 +148,7 @@ def fetch_session(
         (*limits, RateLimit(max_rate)) if max_rate else tuple(limits),
         cancel or threading.Event(),
         server,
+        reserve=DiskReserve(out_dir, min_free) if min_free > 0 else None,
     )
     transfers: dict[str, FileTransfer] = {}
     try:

@@ -25,6 +25,7 @@ from fleetlog.shore.answers import PendingRange, TransientQueryError
 from fleetlog.shore.client import FleetClient
 from fleetlog.shore.pacing import Pacer, RateLimit
 from fleetlog.storage.download import PartFile, sha256_file
+from fleetlog.storage.reserve import DiskReserve
 from fleetlog.wire.query import FileInfo, FileMeta
 
 __all__ = [
@@ -122,6 +123,8 @@ class TransferContext:
     server: str | None = None
     received: int = 0
     link: _LinkRate = field(default_factory=_LinkRate)
+    #: free space to leave where the files go (None: no check)
+    reserve: DiskReserve | None = None
 
 
 def riding_out(ctx: TransferContext, call: Callable[[], _T]) -> _T:
@@ -243,6 +246,12 @@ class FileTransfer:
             return
         if target == self.part.size > 0 and self.meta is not None:
             return  # nothing new (a followed file that did not grow): no range to ask
+        if self.ctx.reserve is not None:
+            # Refused before the first range: a file the disk cannot take (or a listing that
+            # lies about its size) is not half-fetched into the reserve.
+            self.ctx.reserve.check(
+                max(0, target - self.part.size), f"{self.ctx.session}/{self.name}"
+            )
         # retry_for counts from when the vehicle stopped answering, not from the start of the
         # file: a transfer longer than retry_for must still ride out a dropped link.
         deadline: float | None = None
@@ -337,6 +346,8 @@ class FileTransfer:
                     raise _Restart
                 data = data[seen:]
                 self._verify_tail = False
+            if ctx.reserve is not None:
+                ctx.reserve.check(len(data), f"{ctx.session}/{self.name}")
             part.append(data)
             ctx.received += len(data)
             ctx.progress.advance(ctx.vehicle, len(data))

@@ -9,6 +9,7 @@ locally; hostile requests are refused and the vehicles keep serving.
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 
 import pytest
@@ -262,3 +263,24 @@ def test_remote_entries_equal_local_entries(fleet: Fleet, reference: Path, tmp_p
         assert stream.end.matched == len(local)
     assert remote == local
     assert any(isinstance(e.value, BinaryRef) for e in remote)
+
+
+def test_fetch_leaves_the_disk_reserve_free(fleet: Fleet, reference: Path, tmp_path: Path) -> None:
+    # The shore's disk is real: a reserve above what it has free refuses every file before
+    # a byte is written; the same fetch with the reserve off then completes.
+    src = tmp_path / "vehicles"
+    src.mkdir()
+    fleet.serve(copy_reference(reference, "ivp_session", src), "alpha")
+    out = tmp_path / "shore"
+    beyond = shutil.disk_usage(tmp_path).free + (1 << 30)
+    refused = fleet.cli("fetch", "alpha", IVP, "-o", str(out), "--min-free-disk", str(beyond))
+    assert refused.returncode == 1
+    assert "kept free (--min-free-disk)" in refused.stderr, refused.stderr
+    assert "Traceback" not in refused.stderr
+    assert not [p for p in out.rglob("*") if p.is_file() and ".part" not in p.name]
+    bad = fleet.cli("fetch", "alpha", IVP, "-o", str(out), "--min-free-disk", "lots")
+    assert bad.returncode != 0
+    assert "--min-free-disk" in bad.stderr
+    done = fleet.cli("fetch", "alpha", IVP, "-o", str(out), "--min-free-disk", "0")
+    assert done.returncode == 0, done.stderr
+    same_tree(src / "ivp_session" / IVP, out / IVP)
