@@ -37,8 +37,9 @@ from rich.console import Console
 from fleetlog.cli.replay_terminal import ProgressLine
 from fleetlog.moos.alog import LineFormatter, format_banner
 from fleetlog.replayer.clock import RealClock
-from fleetlog.replayer.engine import Player, PlayOptions
+from fleetlog.replayer.engine import Player
 from fleetlog.replayer.inputs import open_input
+from fleetlog.replayer.options import PlayOptions
 from fleetlog.replayer.schedule import Schedule
 from fleetlog.storage.readers import AlogReader
 from fleetlog.transport.bus import MoosPublisher

@@ -28,8 +28,9 @@ from fleetlog.cli.options import (
 from fleetlog.cli.replay_terminal import Keyboard, ProgressLine
 from fleetlog.errors import UsageError
 from fleetlog.replayer.control import MAX_RATE, MIN_RATE
-from fleetlog.replayer.engine import Player, PlayOptions
+from fleetlog.replayer.engine import Player
 from fleetlog.replayer.filters import FilterSpec
+from fleetlog.replayer.options import PlayOptions
 from fleetlog.replayer.report import State
 from fleetlog.replayer.schedule import DEFAULT_WINDOW
 from fleetlog.replayer.service import ReplayConfig, ReplayService

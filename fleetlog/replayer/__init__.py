@@ -7,9 +7,10 @@ Zenoh side (publishing, PLAYBACK_CHOKE, the control queryable, the status public
 """
 
 from fleetlog.replayer.clock import FakeClock, RealClock
-from fleetlog.replayer.engine import Player, PlayOptions
+from fleetlog.replayer.engine import Player
 from fleetlog.replayer.filters import FilterSpec
 from fleetlog.replayer.inputs import ReplayInput, open_inputs
+from fleetlog.replayer.options import PlayOptions
 from fleetlog.replayer.report import State, Status, Summary
 
 __all__ = [

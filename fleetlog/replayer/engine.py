@@ -7,13 +7,11 @@ reaches its time; the player waits for that with :meth:`Clock.wait` (the real cl
 then spins for the last millisecond), publishes it, and moves on. As fast as possible, nothing
 waits.
 
-What uPlayBack does and this keeps (MOOS_FORMAT.md §8):
+What uPlayBack does and this keeps (MOOS_FORMAT.md §8), besides what it publishes
+(:mod:`fleetlog.replayer.output`):
 
-* each message keeps its variable and source (split into source, aux and community), its time
-  is the replay clock's wall time, and its original absolute time travels with it;
-* ``PLAYBACK_DB_TIME`` (a double, absolute log time, source ``uPlayback``) is posted first in
-  every 10 ms tick that posts something, to each vehicle that gets something in it; its value
-  is the log time at the end of the tick (as fast as possible: the entry's time);
+* ``PLAYBACK_DB_TIME``'s value is the log time at the end of its tick (as fast as possible:
+  the entry's time);
 * PLAYBACK_CHOKE: :meth:`Player.heartbeat` takes a client's heartbeat (its own clock's time);
   while a heartbeat has been seen and the newest one is more than 2 s old, playback does not
   advance. A seek forgets the heartbeat, as ``GotoTime`` does.
@@ -36,10 +34,9 @@ import queue
 import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future
-from dataclasses import dataclass, field
 
 from fleetlog.errors import ReplayError, StorageError
-from fleetlog.moos.alog import BinaryRef, split_source
+from fleetlog.moos.alog import BinaryRef
 from fleetlog.replayer.clock import Clock
 from fleetlog.replayer.control import (
     Command,
@@ -53,85 +50,23 @@ from fleetlog.replayer.control import (
     check_rate,
     next_rate,
 )
-from fleetlog.replayer.filters import EntryFilter, FilterSpec
+from fleetlog.replayer.filters import EntryFilter
 from fleetlog.replayer.inputs import ReplayInput
+from fleetlog.replayer.options import PlayOptions
+from fleetlog.replayer.output import Output, Prepare, Publish
 from fleetlog.replayer.report import Lateness, State, Status, Summary, VehicleCounts
-from fleetlog.replayer.schedule import DEDUPE_MEMORY, DEFAULT_WINDOW, Item, Schedule
-from fleetlog.wire.message import Kind, MoosMessage, new_message
+from fleetlog.replayer.schedule import Item, Schedule
+from fleetlog.wire.message import Kind
 
-__all__ = ["DB_TIME_SOURCE", "MAX_CHOKE_TIME", "TICK", "PlayOptions", "Player", "Publish"]
+__all__ = ["Player"]
 
-#: uPlayBack's MAX_CHOKE_TIME: how old the client's heartbeat may be before playback waits.
-MAX_CHOKE_TIME = 2.0
-#: uPlayBack's GUI timer period: at most one PLAYBACK_DB_TIME per vehicle per tick.
-TICK = 0.01
-#: The source of PLAYBACK_DB_TIME (uPlayBack's client name).
-DB_TIME_SOURCE = "uPlayback"
 _MAX_ERRORS = 5
-
-#: How the player publishes: ``publish(vehicle, message)``.
-Publish = Callable[[str, MoosMessage], None]
-#: ``prepare(vehicle, variable, kind)``: get ready to publish it (declare its publisher), so
-#: the first publication of a variable is not late by the declaration's cost.
-Prepare = Callable[[str, str, Kind], None]
-#: Slack kept before a due entry when preparing the ones after it, seconds.
-_PREPARE_SLACK = 0.002
 #: The idle hooks (progress display, status publication) run this often, seconds...
 IDLE_PERIOD = 0.25
 #: ...when the next entry is at least this far off...
 IDLE_SLACK = 0.005
 #: ...or, if entries never leave that much room, after this long anyway.
 IDLE_FORCE = 1.0
-
-
-@dataclass(frozen=True)
-class PlayOptions:
-    """How to play.
-
-    Attributes:
-        rate: the rate (0.1 ... 100); None plays as fast as possible.
-        start: where to start, seconds from the origin (the earliest LOGSTART); None: at
-            the first entry.
-        stop: where to stop, seconds from the origin; None: at the end.
-        paused: start paused.
-        loop: start again from ``start`` at the end.
-        filters: which entries to publish.
-        prefix: prepended to every vehicle name, to keep replayed data apart from live
-            vehicles.
-        window: each input's re-sort window, in records.
-        dedupe: drop re-delivered duplicates.
-        dedupe_memory: how many recent entries the duplicate check remembers.
-        db_time: post PLAYBACK_DB_TIME.
-        choke_time: PLAYBACK_CHOKE's limit on the heartbeat's age, seconds.
-    """
-
-    rate: float | None = 1.0
-    start: float | None = None
-    stop: float | None = None
-    paused: bool = False
-    loop: bool = False
-    filters: FilterSpec = field(default_factory=FilterSpec)
-    prefix: str = ""
-    window: int = DEFAULT_WINDOW
-    dedupe: bool = True
-    dedupe_memory: int = DEDUPE_MEMORY
-    db_time: bool = True
-    choke_time: float = MAX_CHOKE_TIME
-
-    def check(self) -> None:
-        """Validate the options.
-
-        Raises:
-            ReplayError: a rate out of range, a stop before the start, a negative window.
-        """
-        if self.rate is not None:
-            check_rate(self.rate)
-        if self.start is not None and self.stop is not None and self.stop < self.start:
-            msg = f"--to {self.stop:g} is before --from {self.start:g}"
-            raise ReplayError(msg)
-        if self.window < 0:
-            msg = f"the sort window must be 0 or more entries, not {self.window}"
-            raise ReplayError(msg)
 
 
 class Player:
@@ -160,9 +95,7 @@ class Player:
         self.options = options or PlayOptions()
         self.options.check()
         self.inputs = inputs
-        self._publish = publish
-        self._prepare = prepare
-        self._prepared: set[tuple[str, str, Kind]] = set()
+        self._out = Output(publish, prepare)
         #: Work for the player's own thread when it has time to spare (redraw a progress
         #: line, publish the status): done here, not in another thread, because another
         #: thread holding the GIL for a millisecond delays the next entry by as much.
@@ -193,9 +126,6 @@ class Player:
         self._next: Item | None = None
         self._pass_items = 0
         self._consumed = -float("inf")  # the newest time the pass went past
-        self._slot = -1
-        self._slot_vehicles: set[str] = set()
-        self._sources: dict[str, tuple[str, str, str]] = {}
         self._counts = {vehicle: VehicleCounts() for vehicle in self.vehicles}
         self._timing = Lateness()
         self._errors: list[str] = []
@@ -322,7 +252,7 @@ class Player:
                 self._begin = self._next.time
             if self.options.db_time:
                 for vehicle in dict.fromkeys(self.vehicles):
-                    self._prepare_once(vehicle, "PLAYBACK_DB_TIME", Kind.DOUBLE)
+                    self._out.prepare_once(vehicle, "PLAYBACK_DB_TIME", Kind.DOUBLE)
             self._prepare_ahead(None)
             with self._lock:
                 self._set_anchor(self._begin)
@@ -367,7 +297,7 @@ class Player:
                 due = self._due(item.time)
                 now = clock.now()
                 if now < due:
-                    if self._prepare is not None:
+                    if self._out.prepares:
                         self._prepare_ahead(due)
                     self._idle(clock.now(), due)
                     now = clock.now()
@@ -393,7 +323,7 @@ class Player:
         self._open(self._begin)
         with self._lock:
             self._set_anchor(self._begin)
-        self._slot = -1
+        self._out.new_tick()
         return True
 
     def _idle_deadline(self) -> float | None:
@@ -413,34 +343,12 @@ class Player:
         for hook in self.idle_hooks:
             hook()
 
-    def _prepare_once(self, vehicle: str, name: str, kind: Kind) -> None:
-        if self._prepare is None:
-            return
-        sig = (vehicle, name, kind)
-        if sig not in self._prepared:
-            if len(self._prepared) > 65536:
-                self._prepared.clear()
-            self._prepared.add(sig)
-            self._prepare(vehicle, name, kind)
-
     def _prepare_ahead(self, due: float | None) -> None:
         """Prepare the next entries' publishers, keeping clear of ``due``."""
-        if self._prepare is None or self._schedule is None:
+        if not self._out.prepares or self._schedule is None:
             return
-        clock = self._clock
         upcoming = [self._next] if self._next is not None else []
-        for item in (*upcoming, *self._schedule.ahead):
-            if due is not None and clock.now() > due - _PREPARE_SLACK:
-                return
-            value = item.entry.value
-            kind = (
-                Kind.DOUBLE
-                if isinstance(value, float)
-                else Kind.STRING
-                if isinstance(value, str)
-                else Kind.BINARY
-            )
-            self._prepare_once(self.vehicles[item.origin], item.entry.key, kind)
+        self._out.prepare_ahead((*upcoming, *self._schedule.ahead), self.vehicles, due, self._clock)
 
     def _choke_deadline(self, now: float) -> float:
         heartbeat = self._heartbeat
@@ -463,15 +371,6 @@ class Player:
                 self._set_anchor(self._frozen)
         return choked
 
-    def _split(self, source: str) -> tuple[str, str, str]:
-        parts = self._sources.get(source)
-        if parts is None:
-            parts = split_source(source)
-            if len(self._sources) > 65536:
-                self._sources.clear()
-            self._sources[source] = parts
-        return parts
-
     def _emit(self, item: Item, due: float | None) -> None:
         """Publish one entry (after PLAYBACK_DB_TIME if it opens a tick) and move on."""
         assert self._schedule is not None
@@ -491,11 +390,7 @@ class Player:
         wall = clock.wall()
         if self.options.db_time:
             self._db_time(vehicle, item, wall)
-        source, aux, community = self._split(entry.source)
-        # new_message: the frozen MoosMessage without its __init__'s seven __setattr__ calls
-        self._publish(
-            vehicle, new_message(entry.key, value, wall, source, aux, community, item.time)
-        )
+        self._out.entry(vehicle, item, value, wall)
         if due is not None:
             self._timing.add(clock.now() - due)
         self._counts[vehicle].published += 1
@@ -504,20 +399,14 @@ class Player:
         self._advance()
 
     def _db_time(self, vehicle: str, item: Item, wall: float) -> None:
-        now = self._clock.now()
-        slot = int(now / TICK)
-        if slot != self._slot:
-            self._slot = slot
-            self._slot_vehicles.clear()
-        if vehicle in self._slot_vehicles:
+        tick_end = self._out.opens_tick(vehicle, self._clock.now())
+        if tick_end is None:
             return
-        self._slot_vehicles.add(vehicle)
         value = item.time
         if self._rate is not None and self._state is State.PLAYING:
-            tick_end = (slot + 1) * TICK
             value = max(value, self._anchor_log + (tick_end - self._anchor_now) * self._rate)
         value = min(value, max(self._stop_time, item.time))
-        self._publish(vehicle, MoosMessage("PLAYBACK_DB_TIME", value, wall, DB_TIME_SOURCE))
+        self._out.db_time(vehicle, value, wall)
 
     # -- commands
 
@@ -558,7 +447,7 @@ class Player:
             if self._state is State.PAUSED:
                 self._state = State.PLAYING
                 self._set_anchor(self._frozen)
-        self._slot = -1
+        self._out.new_tick()
 
     def _apply(self, command: Command) -> None:
         if isinstance(command, Pause):
@@ -603,7 +492,7 @@ class Player:
         else:
             self._skip_to(target)
         self._heartbeat = None  # GotoTime resets the choke state (§8.4)
-        self._slot = -1
+        self._out.new_tick()
         with self._lock:
             if self._state is State.WAITING:
                 self._state = State.PLAYING

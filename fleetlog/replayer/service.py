@@ -17,8 +17,9 @@ from pathlib import Path
 from fleetlog.errors import ReplayError
 from fleetlog.replayer.clock import Clock, RealClock
 from fleetlog.replayer.control import describe, parse_request
-from fleetlog.replayer.engine import Player, PlayOptions
+from fleetlog.replayer.engine import Player
 from fleetlog.replayer.inputs import RemoteSpec, ReplayInput, open_inputs
+from fleetlog.replayer.options import PlayOptions
 from fleetlog.replayer.remote import default_cache, fetch_remote
 from fleetlog.replayer.report import Summary
 from fleetlog.shore.discovery import QUIET, Discovery

@@ -12,9 +12,10 @@ from replay_support import Line, MakeSession
 from fleetlog.errors import ReplayError
 from fleetlog.replayer.clock import FakeClock
 from fleetlog.replayer.control import Pause, Resume, Seek, SetRate, Step, Stop, Toggle
-from fleetlog.replayer.engine import Player, PlayOptions
+from fleetlog.replayer.engine import Player
 from fleetlog.replayer.filters import FilterSpec
 from fleetlog.replayer.inputs import ReplayInput, open_inputs
+from fleetlog.replayer.options import PlayOptions
 from fleetlog.replayer.report import State
 from fleetlog.wire.message import MoosMessage
 

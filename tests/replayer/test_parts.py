@@ -32,8 +32,9 @@ from fleetlog.replayer.control import (
     parse_query,
     parse_request,
 )
-from fleetlog.replayer.engine import Player, PlayOptions
+from fleetlog.replayer.engine import Player
 from fleetlog.replayer.inputs import open_inputs, parse_remote
+from fleetlog.replayer.options import PlayOptions
 from fleetlog.replayer.report import Lateness, State, Status
 from fleetlog.storage.alogscan import read_head
 from fleetlog.wire.message import MoosMessage

@@ -22,8 +22,9 @@ from replay_support import Proc
 from fleetlog.errors import StorageError
 from fleetlog.moos.alog import BinaryRef
 from fleetlog.replayer.clock import FakeClock
-from fleetlog.replayer.engine import Player, PlayOptions
+from fleetlog.replayer.engine import Player
 from fleetlog.replayer.inputs import open_input
+from fleetlog.replayer.options import PlayOptions
 from fleetlog.storage.readers import AlogReader
 from fleetlog.transport.session import SessionOptions, open_session
 from fleetlog.wire.message import MoosMessage, decode_attachment
