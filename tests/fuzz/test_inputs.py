@@ -38,7 +38,7 @@ from fleetlog.errors import FleetlogError, FormatError, MissionError
 from fleetlog.moos.alog import BinaryRef, source_field, split_source
 from fleetlog.moos.mission import parse_mission
 from fleetlog.moos.patterns import MoosGlob
-from fleetlog.moos.slog import parse_slog
+from fleetlog.moos.slog_read import parse_slog
 from fleetlog.moos.ylog import parse_ylog
 from fleetlog.recorder.control import MAX_COPY_BYTES, MAX_LOG_REQUESTS
 from fleetlog.recorder.engine import Recorder

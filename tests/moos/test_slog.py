@@ -18,8 +18,6 @@ from fleetlog.errors import FormatError
 from fleetlog.moos.alog import Banner, Variant, format_banner, format_logstart
 from fleetlog.moos.slog import (
     HEADER_RULE,
-    SlogLabels,
-    SlogRow,
     SlogTable,
     claim_slot,
     dynamic_names,
@@ -27,10 +25,9 @@ from fleetlog.moos.slog import (
     format_row,
     format_slog_header,
     format_slog_value,
-    parse_row,
-    parse_slog,
     slot_offsets,
 )
+from fleetlog.moos.slog_read import SlogLabels, SlogRow, parse_row, parse_slog
 
 SLOGS = sorted(REFERENCE.rglob("*.slog"))
 RUN_A = REFERENCE / "captured" / "runA_themoos_wildcard_restart" / "logs"

@@ -29,7 +29,7 @@ from helpers import Proc, free_port, run_cli
 from fleetlog.api import Vehicle
 from fleetlog.moos.alog import BANNER_RULE, BinaryRef, Entry
 from fleetlog.moos.blog import payload_at
-from fleetlog.moos.slog import SlogFile, parse_slog
+from fleetlog.moos.slog_read import SlogFile, parse_slog
 from fleetlog.moos.ylog import YlogFile, parse_ylog
 from fleetlog.transport.services import live_vehicles
 from fleetlog.transport.session import SessionOptions, open_session

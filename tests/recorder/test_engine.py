@@ -30,7 +30,8 @@ from fleetlog.moos.alog import BinaryRef, Entry, Variant, format_banner
 from fleetlog.moos.blog import payload_at
 from fleetlog.moos.mission import LoggerConfig, parse_mission
 from fleetlog.moos.naming import ctime_text, session_root
-from fleetlog.moos.slog import SLOT_WIDTH, format_label_block, format_row, parse_slog
+from fleetlog.moos.slog import SLOT_WIDTH, format_label_block, format_row
+from fleetlog.moos.slog_read import parse_slog
 from fleetlog.moos.ylog import format_ylog_line, parse_ylog
 from fleetlog.recorder.engine import Recorder
 from fleetlog.wire.message import MoosMessage
