@@ -33,9 +33,11 @@ __all__ = ["Lane"]
 _unpack_time = struct.Struct("<d").unpack_from
 #: a tail whose formats were never looked for
 _UNKNOWN: Any = object()
-#: bounds on the caches against floods of keys or publishers
+#: bounds on the caches against floods of keys or publishers: keys, origins per key, and
+#: line formats in all (about 16 MB at most)
 _MAX_KEYS = 65536
 _MAX_TAILS = 64
+_MAX_FORMATS = 65536
 
 
 class _Plan:
@@ -68,6 +70,8 @@ class Lane:
         self._decoder = decoder
         self._seen = seen
         self._plans: dict[str, _Plan] = {}
+        #: the origins' entries in all the plans (bounded by _MAX_FORMATS)
+        self.cached = 0
         #: samples the lane logged itself (tests, benchmarks)
         self.fast = 0
 
@@ -75,19 +79,28 @@ class Lane:
         plans = self._plans
         if len(plans) >= _MAX_KEYS:
             plans.clear()
+            self.cached = 0
         plan = plans[key] = _Plan(self._decoder.plain_name(key))
         return plan
 
     def _formats(self, plan: _Plan, attachment: bytes, tail: bytes) -> tuple[str, str] | None:
         formats = plan.formats
         if len(formats) >= _MAX_TAILS:
+            self.cached -= len(formats)
             formats.clear()
+        if self.cached >= _MAX_FORMATS:
+            # A flood of keys and origins: start again (rare; each entry is rebuilt on use).
+            for each in self._plans.values():
+                each.formats.clear()
+            formats.clear()
+            self.cached = 0
         origin = self._decoder.plain_origin(attachment)
         name = plan.name
         found = None
         if origin is not None and name is not None:
             found = self._recorder.lane_formats(name, *origin)
         formats[tail] = found
+        self.cached += 1
         return found
 
     def _general(self, sample: Any) -> None:

@@ -8,10 +8,15 @@ counters and posts must be identical, and the lane must have taken the common sa
 from __future__ import annotations
 
 from collections.abc import Iterator
+from pathlib import Path
 
 import pytest
 from lane_support import PREFIX, T0, Part, SampleTap, both_ways, mission, sample_tap
 
+import fleetlog.recorder.lane as lane_module
+from fleetlog.recorder.engine import Recorder
+from fleetlog.recorder.lane import Lane
+from fleetlog.transport.bus import SampleDecoder
 from fleetlog.wire.message import encode_attachment
 
 DOUBLE = "text/plain;moos-double"
@@ -126,3 +131,25 @@ def test_strings_with_newlines_and_not_utf8(tap: SampleTap) -> None:
     ]
     # Fast: the last two (the first sample and the three odd ones go the general way).
     assert check(tap, parts) == 2
+
+
+def test_a_flood_of_origins_keeps_the_caches_bounded(
+    tap: SampleTap, monkeypatch: pytest.MonkeyPatch, tmp_path: Path
+) -> None:
+    # Two keys of eight origins each would hold 16 formats: the bound of 10 must act.
+    monkeypatch.setattr(lane_module, "_MAX_TAILS", 8)
+    monkeypatch.setattr(lane_module, "_MAX_FORMATS", 10)
+    parts = [(PREFIX + f"K{i % 2}", b"1.5", DOUBLE, att(T0 + 1, f"p{i % 23}")) for i in range(300)]
+    samples = tap.samples(parts)
+    general, lane = both_ways(mission(), samples, T0 + 2)
+    assert lane.files == general.files
+    assert lane.stats == general.stats
+    assert lane.fast > 0
+    # The same samples through one lane: its caches never pass their bounds.
+    rec = Recorder(mission(), vehicle="V", publish=lambda m: None, cwd=tmp_path, clock=lambda: T0)
+    rec.start()
+    way = Lane(rec, SampleDecoder(PREFIX), lambda info, sample: None)
+    for sample in samples:
+        way.pump(sample, lambda: None, 1)
+        assert way.cached == sum(len(plan.formats) for plan in way._plans.values()) <= 10
+    rec.stop()
