@@ -249,9 +249,8 @@ class FileTransfer:
         if self.ctx.reserve is not None:
             # Refused before the first range: a file the disk cannot take (or a listing that
             # lies about its size) is not half-fetched into the reserve.
-            self.ctx.reserve.check(
-                max(0, target - self.part.size), f"{self.ctx.session}/{self.name}"
-            )
+            what = f"{self.ctx.session}/{self.name}"
+            self.ctx.reserve.check(max(0, target - self.part.size), what, writing=False)
         # retry_for counts from when the vehicle stopped answering, not from the start of the
         # file: a transfer longer than retry_for must still ride out a dropped link.
         deadline: float | None = None

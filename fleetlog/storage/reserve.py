@@ -55,8 +55,11 @@ class DiskReserve:
             return None  # cannot tell: the writes themselves will say
         return st.f_bavail * st.f_frsize
 
-    def check(self, incoming: int, what: str = "") -> None:
+    def check(self, incoming: int, what: str = "", *, writing: bool = True) -> None:
         """Raise if writing ``incoming`` more bytes would leave less than the reserve.
+
+        ``writing``: the bytes are written now (counted until the next look); False asks
+        ahead of a transfer without counting what it has not written yet.
 
         Raises:
             StorageError: it would; the message says how much is free and how to go on.
@@ -83,4 +86,5 @@ class DiskReserve:
                 " what is fetched so far is kept"
             )
             raise StorageError(msg)
-        self._since += incoming
+        if writing:
+            self._since += incoming
