@@ -61,7 +61,7 @@ MinFreeDisk = Annotated[
     typer.Option(
         "--min-free-disk",
         metavar="SIZE",
-        help="Leave SIZE free where the files go (1GB; 0: no check): a file that would go"
+        help="Leave SIZE free where the files go (e.g. 1GB; 0: no check): a file that would go"
         " below is not fetched, and what is fetched so far is kept.",
     ),
 ]
