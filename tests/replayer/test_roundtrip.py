@@ -21,7 +21,7 @@ from replay_support import Line, MakeSession, Proc
 
 from fleetlog.moos.alog import BinaryRef, Entry
 from fleetlog.storage.readers import AlogReader, find_alog
-from fleetlog.transport.bus import MoosPublisher
+from fleetlog.transport.publisher import MoosPublisher
 from fleetlog.transport.session import SessionOptions, open_session
 from fleetlog.wire.keys import parse_var_key, service_key, var_key
 from fleetlog.wire.message import decode_attachment
