@@ -429,6 +429,7 @@ class Player:
         allows = self._filter.allows if self._filter.active else None
         vehicles = self.vehicles
         counts = [self._counts[v] for v in vehicles]
+        published = [0] * len(vehicles)  # added to counts every 64 entries, and at the end
         stop_time = self._stop_time
         db_time = self.options.db_time
         hooks = self.idle_hooks
@@ -439,18 +440,17 @@ class Player:
             while head is not None:
                 run = schedule.take()
                 for index, item in enumerate(chain((head,), run)):
-                    if (
-                        item[TIME] > stop_time
-                        or not commands.empty()
-                        or self._heartbeat is not None
-                    ):
+                    t = item[TIME]
+                    if t > stop_time or not commands.empty() or self._heartbeat is not None:
                         schedule.give_back(run[index:])
                         return
-                    if item[TIME] > consumed:
-                        consumed = item[TIME]
+                    if t > consumed:
+                        consumed = t
                     played += 1
-                    if hooks and not played & 63:
-                        self._idle(clock.now(), None)
+                    if not played & 63:
+                        _add_published(counts, published)
+                        if hooks:
+                            self._idle(clock.now(), None)
                     if allows is not None and not allows(item[KEY], item[SOURCE]):
                         counts[item[ORIGIN]].filtered += 1
                         continue
@@ -460,15 +460,16 @@ class Player:
                         last = self._last
                         continue
                     at = wall()
-                    vehicle = vehicles[item[ORIGIN]]
+                    origin = item[ORIGIN]
                     if db_time:
-                        self._db_time(vehicle, item, at)
-                    publish(vehicle, item, value, at)
-                    counts[item[ORIGIN]].published += 1
-                    if item[TIME] > last:
-                        last = self._last = item[TIME]
+                        self._db_time(vehicles[origin], item, at)
+                    publish(vehicles[origin], item, value, at)
+                    published[origin] += 1
+                    if t > last:
+                        last = self._last = t
                 head = item = next(schedule, None)
         finally:
+            _add_published(counts, published)
             self._next = item
             self._consumed = consumed
             self._pass_items += played
@@ -627,3 +628,11 @@ class Player:
                 for i, item in enumerate(self.inputs)
             ],
         )
+
+
+def _add_published(counts: list[VehicleCounts], published: list[int]) -> None:
+    """Add the entries published since the last call to each input's counts; reset them."""
+    for origin, count in enumerate(published):
+        if count:
+            counts[origin].published += count
+            published[origin] = 0

@@ -83,7 +83,14 @@ class Output:
     def entry(self, vehicle: str, item: Item, value: float | str | bytes, wall: float) -> None:
         """Publish an entry (its payload read) with the replay clock's wall time."""
         if self._senders is not None:
-            kind, payload = encode_value(value)
+            # encode_value's two common cases inline (its checks cost as much as the rest)
+            kind: Kind
+            if type(value) is float and value == value:
+                kind, payload = Kind.DOUBLE, repr(value).encode("ascii")
+            elif isinstance(value, str):
+                kind, payload = Kind.STRING, value.encode("utf-8", "surrogateescape")
+            else:
+                kind, payload = encode_value(value)
             sender = self._by_origin.get((item[ORIGIN], item[KEY], item[SOURCE], kind))
             if sender is None:
                 sender = self._sender(vehicle, item, kind)

@@ -46,6 +46,7 @@ from fleetlog.replayer.items import (
     Item,
     entry_of,
     late,
+    ordered,
     with_payload,
 )
 
@@ -184,36 +185,55 @@ class Schedule:
 
     def _finish(self, run: list[Item]) -> list[Item]:
         """Drop duplicates and mark late entries, in play order."""
+        if not self._dedupe:
+            return self._mark_late(run)
+        seen, order = self._seen, self._order
+        sigs = [item[SIG] for item in run]
+        if (
+            seen.isdisjoint(sigs)
+            and len(set(sigs)) == len(sigs)
+            and not any(type(item[VALUE]) is BinaryRef for item in run)
+        ):
+            # No duplicate (even against entries the memory would forget during the run,
+            # which the exact way below then sees): remember the run at once.
+            order.extend(sigs)
+            seen.update(sigs)
+            excess = len(order) - self._memory
+            if excess > 0:
+                seen.difference_update([order.popleft() for _ in range(excess)])
+            return self._mark_late(run)
         out: list[Item] = []
-        append = out.append
+        memory = self._memory
+        for item in run:
+            if type(item[VALUE]) is BinaryRef:
+                item = with_payload(self.inputs[item[ORIGIN]], item)
+            sig = item[SIG]
+            if sig in seen:
+                self.duplicates += 1
+                continue
+            seen.add(sig)
+            order.append(sig)
+            if len(order) > memory:
+                seen.discard(order.popleft())
+            out.append(item)
+        return self._mark_late(out)
+
+    def _mark_late(self, run: list[Item]) -> list[Item]:
+        """Mark the entries that come after a later one (in play order)."""
+        if not run:
+            return run
         newest = self._newest
-        if self._dedupe:
-            seen, order, memory = self._seen, self._order, self._memory
-            for item in run:
-                if type(item[VALUE]) is BinaryRef:
-                    item = with_payload(self.inputs[item[ORIGIN]], item)
-                sig = item[SIG]
-                if sig in seen:
-                    self.duplicates += 1
-                    continue
-                seen.add(sig)
-                order.append(sig)
-                if len(order) > memory:
-                    seen.discard(order.popleft())
-                if item[TIME] < newest:
-                    item = late(item)
-                    self.late += 1
-                else:
-                    newest = item[TIME]
-                append(item)
-        else:
-            for item in run:
-                if item[TIME] < newest:
-                    item = late(item)
-                    self.late += 1
-                else:
-                    newest = item[TIME]
-                append(item)
+        if run[0][TIME] >= newest and ordered([item[TIME] for item in run]):
+            self._newest = run[-1][TIME]
+            return run
+        out: list[Item] = []
+        for item in run:
+            if item[TIME] < newest:
+                out.append(late(item))
+                self.late += 1
+            else:
+                newest = item[TIME]
+                out.append(item)
         self._newest = newest
         return out
 
