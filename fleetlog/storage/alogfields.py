@@ -17,7 +17,14 @@ from typing import TYPE_CHECKING, Any
 if TYPE_CHECKING:
     import polars as pl
 
-__all__ = ["entry_start", "line_start", "overflow_fields", "standard_layout", "starts_entry"]
+__all__ = [
+    "entry_line",
+    "entry_start",
+    "line_start",
+    "overflow_fields",
+    "standard_layout",
+    "starts_entry",
+]
 
 #: Lines looked at, from the end of a block, for an entry to cut the block before.
 _CUT_LOOKBACK = 64
@@ -99,6 +106,36 @@ def standard_layout(pl: ModuleType) -> Any:
         & line.str.slice(16, 21).str.contains(_STD_KEY)
         & source_field.str.contains(_STD_SOURCE)
     )
+
+
+def _field_rule(chars: str, width: int, shortest: int) -> str:
+    """A regex: a field of ``chars`` left-justified to ``width`` (or wider), one space after."""
+    padded = "|".join(f"{chars}{{{n}}} {{{width + 1 - n}}}" for n in range(shortest, width))
+    return f"(?:{padded}|{chars}{{{width},}} )"
+
+
+#: The writer's column rule as one regex on a whole line, for lines whose fields may be
+#: wider than their columns: a time left-justified to 15 or wider, a variable (at least
+#: one character) to 20, a source (maybe none) to 15, each followed by one space. Each
+#: field is cut at its first space (no field holds one), so a line matches exactly when
+#: :func:`overflow_fields` finds its fields, given that its time is a time (_TIME_FIELD).
+_ENTRY_LINE = (
+    "^" + _field_rule("[-+.0-9eE]", 15, 1) + _field_rule("[^ ]", 20, 1) + _field_rule("[^ ]", 15, 0)
+)
+#: The line's first field (up to its first space) is a time.
+_TIME_FIELD = r"^-?[0-9]+(?:\.[0-9]*)?(?:[eE][-+]?[0-9]+)? "
+
+
+@functools.cache
+def entry_line(pl: ModuleType) -> Any:
+    """An expression: the line ``l`` is an entry, whatever its fields' widths.
+
+    True exactly where :func:`standard_layout` is or :func:`overflow_fields` finds fields,
+    in two regex tests of the whole line (no field cut out): for reads that need to know
+    which lines are entries but not the fields of most of them.
+    """
+    line = pl.col("l")
+    return line.str.contains(_TIME_FIELD) & line.str.contains(_ENTRY_LINE)
 
 
 def overflow_fields(pl: ModuleType, lines: pl.DataFrame) -> pl.DataFrame:
