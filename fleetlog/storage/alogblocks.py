@@ -51,6 +51,7 @@ class Parsed:
     orphans: list[int]  # line numbers of stray lines
     exact: bool  # the block was valid UTF-8
     scanned: int = 0  # entries read (before ``where``)
+    lines: int = 0  # lines in the block
 
 
 def parse_block(
@@ -177,4 +178,4 @@ def parse_block(
     )
     if block is not None:
         frame = exact_raw(pl, frame, block, state.lineno)
-    return Parsed(frame, consumed, end_mark, orphans, block is None, scanned)
+    return Parsed(frame, consumed, end_mark, orphans, block is None, scanned, n)

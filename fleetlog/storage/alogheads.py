@@ -140,33 +140,33 @@ def _whole(
 def _selective(pl: ModuleType, text: str, literals: tuple[str, ...]) -> Heads:
     col = pl.col
     line = col("l")
-    lines = (
-        _lines(pl, text)
-        .with_columns(
-            entry=entry_line(pl),
-            comment=line.str.starts_with("%"),
-            maybe=line.str.contains_any(list(literals)),
-        )
-        .collect()
+    # One pass over the lines (polars computes the shared part once): how many lines are
+    # entries and comments, the comments, and the fields of the entries that may be kept
+    # (those holding a literal) and of the last line.
+    base = _lines(pl, text).with_columns(
+        entry=entry_line(pl),
+        comment=line.str.starts_with("%"),
+        maybe=line.str.contains_any(list(literals)),
     )
-    n = lines.height
-    entries = int(lines["entry"].sum())
-    comments = lines.filter(col("comment")).select("idx", "l")
-    lines_only = lines.select("idx", "l")
+    counts, lines, comments, picked = pl.collect_all(
+        [
+            base.select(n=pl.len(), entries=col("entry").sum(), comments=col("comment").sum()),
+            base.select("idx", "l"),
+            base.filter(col("comment")).select("idx", "l"),
+            base.filter(col("entry") & (col("maybe") | (col("idx") == pl.len() - 1))).select(
+                col("idx"), line, standard_layout(pl).alias("std"), *_field_exprs(pl)
+            ),
+        ]
+    )
+    n, entries, _ = counts.row(0)
     if entries + comments.height < n:
         # continuation or stray lines: which entry owns a line needs every entry
-        parsed = lines_only.select(
-            col("idx"), line, standard_layout(pl).alias("std"), *_field_exprs(pl)
-        )
-        return _whole(pl, lines_only, parsed.drop("std"), parsed["std"], comments)
-    # Every line is an entry or a comment: cut the fields of the entries that may be kept
-    # and of the last line only.
-    picked = lines.filter(col("entry") & (col("maybe") | (col("idx") == n - 1))).select(
-        col("idx"), line, standard_layout(pl).alias("std"), *_field_exprs(pl)
-    )
+        parsed = lines.select(col("idx"), line, standard_layout(pl).alias("std"), *_field_exprs(pl))
+        return _whole(pl, lines, parsed.drop("std"), parsed["std"], comments)
+    # Every line is an entry or a comment: the entries not picked cannot be kept.
     std_mask = picked["std"]
     heads = picked.drop("std")
     if not std_mask.all():
         wide = overflow_fields(pl, heads.filter(~std_mask).select("idx", "l"))
         heads = pl.concat([heads.filter(std_mask), wide.select(heads.columns)]).sort("idx")
-    return Heads(lines_only, heads, comments, entries, True, None, None)
+    return Heads(lines, heads, comments, entries, True, None, None)

@@ -428,7 +428,7 @@ class AlogReader:
                 while pending:
                     yield from self._account(pending.popleft().result(), state)
                 parsed = self._parse(pl, buf[:end], state, want, final=False)
-                kept = buf.count(b"\n", 0, end) + 1 - parsed.consumed
+                kept = parsed.lines - parsed.consumed
                 carry = buf[line_start(buf, end, kept) :]
                 yield from self._account(parsed, state)
                 state.lineno += parsed.consumed
