@@ -174,7 +174,8 @@ def parse_block(
         logstart,
         want,
         continued,
-        _BINARY_OPEN in text,
+        # a binary reference is a whole one-line value: only values that start with the tag
+        heads.height > 0 and bool(heads["v"].str.starts_with(_BINARY_OPEN).any()),
     )
     if block is not None:
         frame = exact_raw(pl, frame, block, state.lineno)

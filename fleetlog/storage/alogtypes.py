@@ -38,7 +38,7 @@ def typed(
     ``mark`` is a bool when the whole block has one DATATYPE MARKING state (nearly always:
     the expressions are then simpler), else an expression; ``continued`` says whether any
     entry has continuation lines; ``binary`` whether any value may be a binary reference
-    (the block holds ``<MOOS_BINARY>``: without it, the tag's regex is not run on every value).
+    (a value starts with ``<MOOS_BINARY>``: without one, the tag's regex is not run at all).
     """
     names = [name for name in _OUTPUTS if name in want]
     extra = [name for name in ("kpos", "spos", "vpos") if name in heads.columns]
