@@ -14,6 +14,8 @@ import functools
 from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
+from fleetlog.storage.columns import in_memory
+
 if TYPE_CHECKING:
     import polars as pl
 
@@ -148,7 +150,7 @@ def overflow_fields(pl: ModuleType, lines: pl.DataFrame) -> pl.DataFrame:
     frame = lines.lazy()
     for method, args, kwargs in _overflow_plan(pl):
         frame = getattr(frame, method)(*args, **kwargs)
-    return frame.collect()
+    return frame.collect(engine=in_memory(pl))
 
 
 @functools.cache

@@ -19,6 +19,7 @@ from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
 from fleetlog.storage.alogfields import entry_line, overflow_fields, standard_layout
+from fleetlog.storage.columns import in_memory
 
 if TYPE_CHECKING:
     import polars as pl
@@ -87,7 +88,7 @@ def find_heads(pl: ModuleType, text: str, literals: tuple[str, ...] | None = Non
     parsed = (
         _lines(pl, text)
         .select(pl.col("idx"), pl.col("l"), standard_layout(pl).alias("std"), *_field_exprs(pl))
-        .collect()
+        .collect(engine=in_memory(pl))
     )
     return _whole(pl, parsed.select("idx", "l"), parsed.drop("std"), parsed["std"])
 
@@ -156,7 +157,8 @@ def _selective(pl: ModuleType, text: str, literals: tuple[str, ...]) -> Heads:
             base.filter(col("entry") & (col("maybe") | (col("idx") == pl.len() - 1))).select(
                 col("idx"), line, standard_layout(pl).alias("std"), *_field_exprs(pl)
             ),
-        ]
+        ],
+        engine=in_memory(pl),
     )
     n, entries, _ = counts.row(0)
     if entries + comments.height < n:

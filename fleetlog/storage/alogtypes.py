@@ -12,7 +12,7 @@ from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
 from fleetlog.moos.alog import split_source
-from fleetlog.storage.columns import TYPES
+from fleetlog.storage.columns import TYPES, in_memory
 
 if TYPE_CHECKING:
     import polars as pl
@@ -58,7 +58,7 @@ def typed(
         ).alias("time"),
     }
     exprs = [per_block[name] if name in per_block else outputs[name] for name in names]
-    result = frame.select(*exprs, *extra).collect()
+    result = frame.select(*exprs, *extra).collect(engine=in_memory(pl))
     if "src" in want or "aux" in want:
         result = _with_source_parts(pl, result)
     return result
