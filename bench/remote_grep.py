@@ -91,11 +91,22 @@ def grep_round(endpoint: str, request: GrepRequest) -> tuple[float, int]:
     return seconds, count
 
 
+HERE = Path(__file__).resolve().parent.parent
+
+
+def tree_env(tree: Path | None) -> tuple[dict[str, str], Path]:
+    """The environment and working directory of a child process of ``tree`` (None: this).
+
+    ``python -m``/``-c`` put the working directory first on sys.path, before PYTHONPATH:
+    a child started from another tree's directory would import that tree's fleetlog.
+    """
+    root = HERE if tree is None else tree
+    return {**os.environ, "PYTHONPATH": str(root)}, root
+
+
 def child_grep_round(endpoint: str, name: str, tree: Path | None) -> tuple[float, int]:
     """The grep from a child process of ``tree`` (this tree when None); the clock is its."""
-    env = dict(os.environ)
-    if tree is not None:
-        env["PYTHONPATH"] = str(tree)
+    env, cwd = tree_env(tree)
     which = "NAV_X" if name == "grep NAV_X" else "all"
     child = subprocess.Popen(
         [sys.executable, "-c", _CLIENT, endpoint, VEHICLE, SESSION, which],
@@ -103,6 +114,7 @@ def child_grep_round(endpoint: str, name: str, tree: Path | None) -> tuple[float
         stdout=subprocess.PIPE,
         text=True,
         env=env,
+        cwd=cwd,
     )
     assert child.stdin is not None
     assert child.stdout is not None
@@ -117,23 +129,23 @@ def child_grep_round(endpoint: str, name: str, tree: Path | None) -> tuple[float
 
 
 class TreeServed(Served):
-    """``fleetlog serve`` from a given source tree (``PYTHONPATH``), or this one."""
+    """``fleetlog serve`` from a given source tree (``PYTHONPATH`` and working directory)."""
 
     def __init__(self, log_root: Path, tree: Path | None) -> None:
         super().__init__(log_root)
         self.tree = tree
 
     def __enter__(self) -> str:
-        old = os.environ.get("PYTHONPATH")
-        if self.tree is not None:
-            os.environ["PYTHONPATH"] = str(self.tree)
+        env, cwd = tree_env(self.tree)
+        old_env, old_cwd = dict(os.environ), Path.cwd()
+        os.environ.update(env)
+        os.chdir(cwd)  # Served starts ``python -m fleetlog`` here
         try:
             return super().__enter__()
         finally:
-            if old is None:
-                os.environ.pop("PYTHONPATH", None)
-            else:
-                os.environ["PYTHONPATH"] = old
+            os.chdir(old_cwd)
+            os.environ.clear()
+            os.environ.update(old_env)
 
 
 def main() -> None:
