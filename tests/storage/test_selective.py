@@ -25,6 +25,7 @@ from hypothesis import strategies as st
 from fleetlog.errors import FleetlogError
 from fleetlog.moos.alog import Entry
 from fleetlog.moos.patterns import glob_match
+from fleetlog.storage import columnar
 from fleetlog.storage.alogfields import entry_line, overflow_fields, standard_layout
 from fleetlog.storage.columnar import AlogReader
 from fleetlog.storage.select import Selection, glob_literal
@@ -73,15 +74,21 @@ def _read(path: Path, where: Any, errors: Any) -> tuple[object, ...]:
     sources=_source_globs | st.just([]),
     keys=_globs | st.just([]),
     errors=st.sampled_from(["skip", "raise"]),
+    workers=st.sampled_from([1, 2]),
 )
 def test_a_selective_read_gives_what_a_whole_read_gives(
     tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
     data: bytes,
     variables: list[str],
     sources: list[str],
     keys: list[str],
     errors: str,
+    workers: int,
 ) -> None:
+    # one worker: blocks are parsed in turn, each one's last entry carried to the next (a
+    # recorder's process); two: blocks cut where an entry starts, parsed side by side
+    monkeypatch.setattr(columnar, "_WORKERS", workers)
     path = tmp_path / "s.alog"
     path.write_bytes(data)
     selection = Selection(variables, sources, keys=keys)
