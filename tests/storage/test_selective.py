@@ -120,7 +120,7 @@ def test_a_selective_read_gives_what_a_whole_read_gives(
         max_size=30,
     )
 )
-def test_entry_line_is_the_standard_layout_or_the_overflow_rule(
+def test_the_line_tests_are_the_column_rule(
     rows: list[tuple[str, str, str, int, int, int, int, str]],
 ) -> None:
     lines = [
@@ -128,7 +128,17 @@ def test_entry_line_is_the_standard_layout_or_the_overflow_rule(
         for t, k, s, wt, wk, ws, gap, v in rows
     ]
     frame = pl.DataFrame({"l": lines}, schema={"l": pl.String}).with_row_index("idx")
-    std = frame.select(standard_layout(pl)).to_series()
+    # the standard layout as it was first written: each column cut out and matched
+    line = pl.col("l")
+    source = line.str.slice(37, 16)
+    sliced = (
+        (source.str.len_chars() == 16)
+        & line.str.slice(0, 16).str.contains(r"^-?[0-9]+(?:\.[0-9]*)?(?:[eE][-+]?[0-9]+)? +$")
+        & line.str.slice(16, 21).str.contains(r"^[^ ]+ +$")
+        & source.str.contains(r"^[^ ]* +$")
+    )
+    std = frame.select(sliced).to_series()
+    assert frame.select(standard_layout(pl)).to_series().to_list() == std.to_list()
     wide = overflow_fields(pl, frame.filter(~std))["idx"].to_list()
     want = [s or i in wide for i, s in enumerate(std.to_list())]
     assert frame.select(entry_line(pl)).to_series().to_list() == want
