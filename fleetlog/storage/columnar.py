@@ -427,7 +427,8 @@ class AlogReader:
                 # parsing it, after the blocks before it.
                 while pending:
                     yield from self._account(pending.popleft().result(), state)
-                parsed = self._parse(pl, buf[:end], state, want, final=False)
+                # (a view: the block is decoded, not copied first)
+                parsed = self._parse(pl, memoryview(buf)[:end], state, want, final=False)
                 kept = parsed.lines - parsed.consumed
                 carry = buf[line_start(buf, end, kept) :]
                 yield from self._account(parsed, state)
@@ -511,7 +512,7 @@ class AlogReader:
     def _parse(
         self,
         pl: ModuleType,
-        block: bytes,
+        block: bytes | memoryview,
         state: PassState,
         want: frozenset[str],
         *,
@@ -525,7 +526,7 @@ class AlogReader:
         return parse_block(
             pl,
             text,
-            block if not exact else None,
+            bytes(block) if not exact else None,
             state,
             self.logstart,
             want,

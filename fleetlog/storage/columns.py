@@ -100,13 +100,13 @@ def in_memory(pl: ModuleType) -> Any:
     return "in-memory"
 
 
-def decode_block(block: bytes) -> tuple[str, bool]:
+def decode_block(block: bytes | memoryview) -> tuple[str, bool]:
     """Decode log bytes; return the text and whether they were all UTF-8.
 
     A byte that is not UTF-8 becomes one U+FFFD, so the text has a character wherever
     ``surrogateescape`` would, and positions found in it carry over to the exact decoding.
     """
     try:
-        return block.decode("utf-8"), True
+        return str(block, "utf-8"), True
     except UnicodeDecodeError:
-        return block.decode("utf-8", "fleetlog.byte-per-char"), False
+        return str(block, "utf-8", "fleetlog.byte-per-char"), False
