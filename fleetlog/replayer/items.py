@@ -40,6 +40,7 @@ __all__ = [
     "Item",
     "entry_of",
     "late",
+    "payload_expr",
     "with_payload",
 ]
 
@@ -69,7 +70,9 @@ LINE: Final = 7
 SIG: Final = 8
 #: True when a later entry was already scheduled (out of order by more than the window)
 LATE: Final = 9
-#: a binary value's bytes, once read from the blog (the duplicate check reads them)
+#: the bytes to publish, when known before publishing: a string's, a double's text as
+#: :func:`~fleetlog.wire.message.encode_value` writes it (made with the batch's columns),
+#: a binary value's once read from the blog; None: made when published
 PAYLOAD: Final = 10
 
 #: Entries made from the reader's columns at a time: ~1 ms of work, so a 1x replay is never
@@ -199,6 +202,7 @@ class InputPass:
             "line",
             sig.alias("sig"),
             (pl.col("type") == "binary").alias("binary"),
+            payload_expr(pl).alias("payload"),
         )
 
     def _exact_items(self, frame: pl.DataFrame) -> list[Item]:
@@ -220,6 +224,7 @@ class InputPass:
             texts,
             frame["line"].to_list(),
             frame["sig"].to_list(),
+            frame["payload"].to_list(),
         )
 
     def _entry_items(
@@ -242,6 +247,7 @@ class InputPass:
             [entry.text for entry in entries],
             [entry.lineno for entry in entries],
             sigs,
+            repeat(None),
         )
 
     def _make(
@@ -253,6 +259,7 @@ class InputPass:
         texts: list[str],
         lines: list[int],
         sigs: Iterable[int],
+        payloads: Iterable[bytes | None],
     ) -> list[Item]:
         n = len(times)
         seq = self._seq
@@ -269,10 +276,26 @@ class InputPass:
                 lines,
                 sigs,
                 repeat(False, n),
-                repeat(None, n),
-                strict=False,  # sigs may be endless (repeat(0))
+                payloads,
+                strict=False,  # sigs and payloads may be endless (repeat)
             )
         )
+
+
+def payload_expr(pl: ModuleType) -> Any:
+    """The expression of the bytes an entry is published as, where polars writes them alike.
+
+    A string's UTF-8 bytes; a double's shortest round-trip text (what ``repr`` and so
+    :func:`~fleetlog.wire.message.encode_value` write) where Python writes it without an
+    exponent, 0 and 1e-4 <= |x| < 1e16 (polars writes the same digits there; its exponent
+    form differs); null for the other doubles (``encode_value`` makes theirs when they are
+    published) and for binary values.
+    """
+    double = pl.col("double")
+    kind = pl.col("type")
+    plain = double.abs().is_between(1e-4, 1e16, closed="left") | (double == 0)
+    text = pl.when((kind == "double") & plain).then(double.cast(pl.String))
+    return text.when(kind == "string").then(pl.col("text")).otherwise(None).cast(pl.Binary)
 
 
 def _utf8(text: str) -> bytes:

@@ -18,7 +18,7 @@ from typing import Protocol
 
 from fleetlog.moos.alog import split_source
 from fleetlog.replayer.clock import Clock
-from fleetlog.replayer.items import KEY, ORIGIN, SOURCE, TIME, VALUE, Item
+from fleetlog.replayer.items import KEY, ORIGIN, PAYLOAD, SOURCE, TIME, VALUE, Item
 from fleetlog.wire.message import Kind, MoosMessage, encode_value, new_message
 
 __all__ = ["DB_TIME_SOURCE", "TICK", "Output", "Prepare", "Publish", "Sender", "Senders"]
@@ -83,12 +83,15 @@ class Output:
     def entry(self, vehicle: str, item: Item, value: float | str | bytes, wall: float) -> None:
         """Publish an entry (its payload read) with the replay clock's wall time."""
         if self._senders is not None:
-            # encode_value's two common cases inline (its checks cost as much as the rest)
+            # The schedule made most payloads with its columns; the rest are made here.
+            payload = item[PAYLOAD]
             kind: Kind
-            if type(value) is float and value == value:
-                kind, payload = Kind.DOUBLE, repr(value).encode("ascii")
-            elif isinstance(value, str):
-                kind, payload = Kind.STRING, value.encode("utf-8", "surrogateescape")
+            if isinstance(value, str):
+                kind = Kind.STRING
+                if payload is None:
+                    payload = value.encode("utf-8", "surrogateescape")
+            elif payload is not None and isinstance(value, float):
+                kind = Kind.DOUBLE
             else:
                 kind, payload = encode_value(value)
             sender = self._by_origin.get((item[ORIGIN], item[KEY], item[SOURCE], kind))
