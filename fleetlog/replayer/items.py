@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import operator
 from collections.abc import Generator, Iterable, Iterator
+from concurrent.futures import Future, ThreadPoolExecutor
 from itertools import islice, repeat
 from types import ModuleType
 from typing import TYPE_CHECKING, Any, Final
@@ -19,6 +20,7 @@ from typing import TYPE_CHECKING, Any, Final
 from fleetlog.errors import StorageError
 from fleetlog.moos.alog import BinaryRef, Entry, parse_binary_ref
 from fleetlog.replayer.inputs import ReplayInput
+from fleetlog.storage.batches import Batch
 
 if TYPE_CHECKING:
     import polars as pl
@@ -148,40 +150,71 @@ class InputPass:
         self._seq = 0
 
     def runs(self) -> Generator[tuple[list[Item], bool], None, None]:
-        """Yield the entries in runs, each with whether it is in time order."""
+        """Yield the entries in runs, each with whether it is in time order.
+
+        A batch's columns are computed on a worker thread while the batch before it is
+        turned into items (polars releases the GIL): the player is not held up by the
+        query between two runs.
+        """
         import polars as pl
 
         logstart = self.source.logstart
         vehicle = _utf8(self.source.vehicle)
         size = self._size
         batches = self.source.reader.frames(_COLUMNS)
+        pool = ThreadPoolExecutor(1, "fleetlog-replay")
         try:
+            pending: Future[pl.DataFrame | list[Entry]] | None = None
             for batch in batches:
-                if batch.exact:
-                    frame = batch.frame
-                    negative = frame["offset"] < 0
-                    if negative.any():
-                        self.before_logstart += int(negative.sum())
-                        frame = frame.filter(~negative)
-                    frame = self._columns(pl, frame, logstart, vehicle)
-                    parts: Iterator[list[Item]] = (
-                        self._exact_items(frame.slice(start, size))
-                        for start in range(0, frame.height, size)
-                    )
-                else:
-                    entries = [entry for entry in batch.entries() if not entry.offset < 0]
-                    self.before_logstart += batch.height - len(entries)
-                    parts = (
-                        self._entry_items(pl, entries[start : start + size], logstart, vehicle)
-                        for start in range(0, len(entries), size)
-                    )
-                for items in parts:
-                    yield items, ordered([item[TIME] for item in items])
+                job = pool.submit(self._prepare, pl, batch, logstart, vehicle)
+                if pending is not None:
+                    yield from self._runs_of(pl, pending.result(), size, logstart, vehicle)
+                pending = job
+            if pending is not None:
+                yield from self._runs_of(pl, pending.result(), size, logstart, vehicle)
         finally:
+            pool.shutdown(wait=True, cancel_futures=True)
             # Closing the pass closes its file now, not when the garbage collector runs.
             close = getattr(batches, "close", None)
             if close is not None:
                 close()
+
+    def _prepare(
+        self, pl: ModuleType, batch: Batch, logstart: float, vehicle: bytes
+    ) -> pl.DataFrame | list[Entry]:
+        """A batch without entries before LOGSTART: its columns, or (not all UTF-8) entries."""
+        if not batch.exact:
+            entries = [entry for entry in batch.entries() if not entry.offset < 0]
+            self.before_logstart += batch.height - len(entries)
+            return entries
+        frame = batch.frame
+        negative = frame["offset"] < 0
+        if negative.any():
+            self.before_logstart += int(negative.sum())
+            frame = frame.filter(~negative)
+        return self._columns(pl, frame, logstart, vehicle)
+
+    def _runs_of(
+        self,
+        pl: ModuleType,
+        prepared: pl.DataFrame | list[Entry],
+        size: int,
+        logstart: float,
+        vehicle: bytes,
+    ) -> Iterator[tuple[list[Item], bool]]:
+        """A prepared batch as runs of items, each with whether it is in time order."""
+        if isinstance(prepared, list):
+            parts = (
+                self._entry_items(pl, prepared[start : start + size], logstart, vehicle)
+                for start in range(0, len(prepared), size)
+            )
+        else:
+            parts = (
+                self._exact_items(prepared.slice(start, size))
+                for start in range(0, prepared.height, size)
+            )
+        for items in parts:
+            yield items, ordered([item[TIME] for item in items])
 
     def _columns(
         self, pl: ModuleType, frame: pl.DataFrame, logstart: float, vehicle: bytes
