@@ -211,10 +211,10 @@ def test_numpy_and_pure_python_assembly_write_the_same_bytes() -> None:
             writer.add_channel(f"/c{i}", "json", sid)
         writer.write_batch(frame)
         writer.write_batch(frame.head(7))
-        # bytes that are not UTF-8 text take the pure-Python path in either writer
+        # bytes that are not UTF-8 text, and a message without data
         writer.write_batch(
             pl.DataFrame(
-                {"channel": [1], "log_time": [5], "data": [b"\xff\xfe"]},
+                {"channel": [1, 2], "log_time": [5, 6], "data": [b"\xff\xfe", None]},
                 schema={"channel": pl.UInt16, "log_time": pl.UInt64, "data": pl.Binary},
             )
         )
@@ -222,7 +222,7 @@ def test_numpy_and_pure_python_assembly_write_the_same_bytes() -> None:
         files.append(buf.getvalue())
     assert files[0] == files[1]
     reader = make_reader(io.BytesIO(files[1]), validate_crcs=True)
-    assert sum(1 for _ in reader.iter_messages()) == n + 7 + 1
+    assert sum(1 for _ in reader.iter_messages()) == n + 7 + 2
 
 
 def test_derived_json_text_is_what_json_encode_writes() -> None:
