@@ -18,6 +18,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from decimal import Decimal
+from functools import partial
 from typing import TYPE_CHECKING, BinaryIO
 
 from fleetlog import __version__
@@ -89,28 +90,72 @@ def _channel_ids(ids: dict[str, int]) -> pl.Expr:
     return index.replace_strict(list(range(len(cids))), cids, return_dtype=pl.UInt16)
 
 
-def _json() -> pl.Expr:
-    """The message text of each row (``{value, source, aux, community}``)."""
+#: What JSON text escapes in a string (all that json_encode escapes): a string without any
+#: of these is its own JSON text between quotes.
+_ESCAPED = r'[\x00-\x1f"\\]'
+
+
+def _json(
+    *, plain_strings: bool = False, plain_sources: bool = False, binary: bool = True
+) -> pl.Expr:
+    """The message text of each row (``{value, source, aux, community}``).
+
+    ``json_encode`` writes the strings (escaping them) unless the caller knows that no string
+    value (``plain_strings``) or no source, aux or community (``plain_sources``) needs
+    escaping: those are written between quotes as they are, the same text at half the cost.
+    ``binary``: the rows may hold binary values (written in base64).
+    """
     import polars as pl
 
-    text = pl.struct(pl.col("string").alias("v")).struct.json_encode()
-    value = (
-        pl.when(pl.col("type") == "double")
-        .then(
-            pl.when(pl.col("double").is_finite())
-            .then(pl.col("double").cast(pl.String))
-            .otherwise(pl.lit("null"))
+    col = pl.col
+    if plain_strings:
+        text = pl.concat_str(pl.lit('"'), col("string"), pl.lit('"'))
+    else:
+        text = pl.struct(col("string").alias("v")).struct.json_encode().str.slice(5).str.head(-1)
+    # Each branch is null where it does not apply: a double's text where it is finite, a
+    # binary's base64 (or null), a string's text; what is left is a NaN or an infinity.
+    branches = [pl.when(col("double").is_finite()).then(col("double").cast(pl.String))]
+    if binary:
+        encoded = pl.concat_str(pl.lit('"'), col("binary").bin.encode("base64"), pl.lit('"'))
+        branches.append(
+            pl.when(col("type") == "binary").then(
+                pl.when(col("binary").is_not_null()).then(encoded).otherwise(pl.lit("null"))
+            )
         )
-        .when(pl.col("type") == "binary")
-        .then(
-            pl.when(pl.col("binary").is_not_null())
-            .then(pl.concat_str(pl.lit('"'), pl.col("binary").bin.encode("base64"), pl.lit('"')))
-            .otherwise(pl.lit("null"))
-        )
-        .otherwise(text.str.slice(5).str.head(-1))
+    # ``string`` is null for doubles, and holds a binary's reference (its branch comes first)
+    value = pl.coalesce(*branches, text, pl.lit("null"))
+    if plain_sources:
+        rest: list[pl.Expr] = [
+            pl.lit(',"source":"'),
+            col("source"),
+            pl.lit('","aux":"'),
+            col("aux"),
+            pl.lit('","community":"'),
+            col("community"),
+            pl.lit('"}'),
+        ]
+    else:
+        rest = [
+            pl.lit(","),
+            pl.struct("source", "aux", "community").struct.json_encode().str.slice(1),
+        ]
+    return pl.concat_str(pl.lit('{"value":'), value, *rest)
+
+
+def _messages(frame: pl.DataFrame, channel: pl.Expr) -> pl.DataFrame:
+    """The batch of messages of a frame of entries (made by a worker of the writer)."""
+    import polars as pl
+
+    plain_sources = not any(
+        frame[name].unique().str.contains(_ESCAPED).any()  # a few distinct names: cheap
+        for name in ("source", "aux", "community")
     )
-    rest = pl.struct("source", "aux", "community").struct.json_encode().str.slice(1)
-    return pl.concat_str(pl.lit('{"value":'), value, pl.lit(","), rest)
+    data = _json(
+        plain_strings=not frame["string"].str.contains(_ESCAPED).any(),
+        plain_sources=plain_sources,
+        binary=bool(frame["type"].eq("binary").any()),
+    )
+    return frame.select(channel.alias("channel"), pl.col("log_time"), data.alias("data"))
 
 
 class _Channels:
@@ -182,14 +227,8 @@ def export_mcap(
                 ids = channels.of(
                     source.vehicle, source.session, timed["variable"].unique().sort().to_list()
                 )
-                channel = _channel_ids(ids)
                 # The JSON text is made by the writer's worker while this thread reads on.
-                writer.write_lazy(
-                    timed.lazy().select(
-                        channel.alias("channel"), "log_time", _json().alias("data")
-                    ),
-                    timed.height,
-                )
+                writer.write_lazy(partial(_messages, timed, _channel_ids(ids)), timed.height)
                 if positions:
                     wanted = timed.filter(
                         pl.col("variable").is_in(list(NAV_VARS)) & (pl.col("type") == "double")

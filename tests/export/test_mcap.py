@@ -225,6 +225,64 @@ def test_numpy_and_pure_python_assembly_write_the_same_bytes() -> None:
     assert sum(1 for _ in reader.iter_messages()) == n + 7 + 2
 
 
+def test_message_text_without_escapes_is_what_json_encode_writes() -> None:
+    # Strings that need no escaping are written between quotes as they are; json_encode
+    # (the general text, _json()) is the oracle, for every mix of plain and escaped strings.
+    from fleetlog.export.tomcap import _json, _messages
+
+    rng = random.Random(7)
+    plain = ["", "x=1,y=2", "é ü 😀", "a/b", "\x7f", "\u2028", "<b>&"]
+    escaped = ['say "hi"', "back\\slash", "tab\t", "nl\n", "\x00", "\x1f"]
+    specials = [float("nan"), float("inf"), -float("inf"), -0.0, 1e-7, 1e300, 3.0]
+
+    def frame(strings: list[str], sources: list[str], binary: bool) -> pl.DataFrame:
+        rows = []
+        for _ in range(300):
+            kind = rng.choice(["double", "string", "binary"] if binary else ["double", "string"])
+            text = rng.choice(strings)
+            rows.append(
+                {
+                    "log_time": rng.randint(0, 10**12),
+                    "source": rng.choice(sources),
+                    "aux": rng.choice(sources),
+                    "community": rng.choice(sources),
+                    "type": kind,
+                    "double": rng.choice(specials) if kind == "double" else None,
+                    "string": None if kind == "double" else text,
+                    "binary": (rng.choice([text.encode(), None]) if kind == "binary" else None),
+                }
+            )
+        return pl.DataFrame(
+            rows,
+            schema={
+                "log_time": pl.UInt64,
+                "source": pl.String,
+                "aux": pl.String,
+                "community": pl.String,
+                "type": pl.String,
+                "double": pl.Float64,
+                "string": pl.String,
+                "binary": pl.Binary,
+            },
+        )
+
+    # each escaped kind alone among plain strings, in the values and in the sources
+    cases = [frame(plain, plain, False), frame(plain, plain, True)]
+    for one in escaped:
+        cases += [frame([*plain, one], plain, False), frame(plain, [*plain, one], True)]
+    for f in cases:
+        got = _messages(f, pl.lit(0, pl.UInt16))["data"].to_list()
+        assert got == f.select(_json()).to_series().to_list()
+        for text, (kind, double, string) in zip(
+            got, f.select("type", "double", "string").iter_rows(), strict=True
+        ):
+            value = json.loads(text)["value"]
+            if kind == "string":
+                assert value == string
+            elif kind == "double":
+                assert value == (double if math.isfinite(double) else None)
+
+
 def test_derived_json_text_is_what_json_encode_writes() -> None:
     # foxglove.py writes the position messages as text (faster); json_encode is the oracle
     from fleetlog.export.foxglove import locations, poses
