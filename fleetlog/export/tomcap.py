@@ -95,25 +95,21 @@ def _channel_ids(ids: dict[str, int]) -> pl.Expr:
 _ESCAPED = r'[\x00-\x1f"\\]'
 
 
-def _json(
-    *, plain_strings: bool = False, plain_sources: bool = False, binary: bool = True
-) -> pl.Expr:
+def _json(*, plain_sources: bool = False, binary: bool = True) -> pl.Expr:
     """The message text of each row (``{value, source, aux, community}``).
 
-    ``json_encode`` writes the strings (escaping them) unless the caller knows that no string
-    value (``plain_strings``) or no source, aux or community (``plain_sources``) needs
-    escaping: those are written between quotes as they are, the same text at half the cost.
-    ``binary``: the rows may hold binary values (written in base64).
+    ``json_encode`` writes the strings (escaping them), unless the caller knows that no
+    source, aux or community needs escaping (``plain_sources``): those are then written
+    between quotes as they are, the same text at half the cost. ``binary``: the rows may
+    hold binary values (written in base64).
     """
     import polars as pl
 
     col = pl.col
-    if plain_strings:
-        text = pl.concat_str(pl.lit('"'), col("string"), pl.lit('"'))
-    else:
-        text = pl.struct(col("string").alias("v")).struct.json_encode().str.slice(5).str.head(-1)
+    text = pl.struct(col("string").alias("v")).struct.json_encode().str.slice(5).str.head(-1)
     # Each branch is null where it does not apply: a double's text where it is finite, a
-    # binary's base64 (or null), a string's text; what is left is a NaN or an infinity.
+    # binary's base64 (or null); then a string's text, which is "null" for a double (its
+    # ``string`` is null) and a binary's reference (its branch comes first).
     branches = [pl.when(col("double").is_finite()).then(col("double").cast(pl.String))]
     if binary:
         encoded = pl.concat_str(pl.lit('"'), col("binary").bin.encode("base64"), pl.lit('"'))
@@ -122,8 +118,7 @@ def _json(
                 pl.when(col("binary").is_not_null()).then(encoded).otherwise(pl.lit("null"))
             )
         )
-    # ``string`` is null for doubles, and holds a binary's reference (its branch comes first)
-    value = pl.coalesce(*branches, text, pl.lit("null"))
+    value = pl.coalesce(*branches, text)
     if plain_sources:
         rest: list[pl.Expr] = [
             pl.lit(',"source":"'),
@@ -146,15 +141,12 @@ def _messages(frame: pl.DataFrame, channel: pl.Expr) -> pl.DataFrame:
     """The batch of messages of a frame of entries (made by a worker of the writer)."""
     import polars as pl
 
-    plain_sources = not any(
-        frame[name].unique().str.contains(_ESCAPED).any()  # a few distinct names: cheap
-        for name in ("source", "aux", "community")
+    # A few distinct names each: cheap to look at (the string values are not: json_encode
+    # costs less than finding whether they need it).
+    plain = not any(
+        frame[name].unique().str.contains(_ESCAPED).any() for name in ("source", "aux", "community")
     )
-    data = _json(
-        plain_strings=not frame["string"].str.contains(_ESCAPED).any(),
-        plain_sources=plain_sources,
-        binary=bool(frame["type"].eq("binary").any()),
-    )
+    data = _json(plain_sources=plain, binary=bool(frame["type"].eq("binary").any()))
     return frame.select(channel.alias("channel"), pl.col("log_time"), data.alias("data"))
 
 

@@ -226,20 +226,21 @@ def test_numpy_and_pure_python_assembly_write_the_same_bytes() -> None:
 
 
 def test_message_text_without_escapes_is_what_json_encode_writes() -> None:
-    # Strings that need no escaping are written between quotes as they are; json_encode
-    # (the general text, _json()) is the oracle, for every mix of plain and escaped strings.
+    # Sources, aux and communities that need no escaping are written between quotes as they
+    # are; json_encode (the general text, _json()) is the oracle, for each escaped character
+    # alone among plain names.
     from fleetlog.export.tomcap import _json, _messages
 
     rng = random.Random(7)
-    plain = ["", "x=1,y=2", "é ü 😀", "a/b", "\x7f", "\u2028", "<b>&"]
+    plain = ["", "pNav", "é ü 😀", "a/b", "\x7f", "\u2028", "<b>&"]
     escaped = ['say "hi"', "back\\slash", "tab\t", "nl\n", "\x00", "\x1f"]
     specials = [float("nan"), float("inf"), -float("inf"), -0.0, 1e-7, 1e300, 3.0]
 
-    def frame(strings: list[str], sources: list[str], binary: bool) -> pl.DataFrame:
+    def frame(sources: list[str], binary: bool) -> pl.DataFrame:
         rows = []
         for _ in range(300):
             kind = rng.choice(["double", "string", "binary"] if binary else ["double", "string"])
-            text = rng.choice(strings)
+            text = rng.choice(plain + escaped)
             rows.append(
                 {
                     "log_time": rng.randint(0, 10**12),
@@ -266,21 +267,23 @@ def test_message_text_without_escapes_is_what_json_encode_writes() -> None:
             },
         )
 
-    # each escaped kind alone among plain strings, in the values and in the sources
-    cases = [frame(plain, plain, False), frame(plain, plain, True)]
-    for one in escaped:
-        cases += [frame([*plain, one], plain, False), frame(plain, [*plain, one], True)]
+    cases = [frame(plain, False), frame(plain, True)]
+    cases += [frame([*plain, one], binary) for one in escaped for binary in (False, True)]
     for f in cases:
         got = _messages(f, pl.lit(0, pl.UInt16))["data"].to_list()
         assert got == f.select(_json()).to_series().to_list()
-        for text, (kind, double, string) in zip(
-            got, f.select("type", "double", "string").iter_rows(), strict=True
+        for text, (kind, double, string, binary, source) in zip(
+            got, f.select("type", "double", "string", "binary", "source").iter_rows(), strict=True
         ):
-            value = json.loads(text)["value"]
+            message = json.loads(text)
+            assert message["source"] == source
             if kind == "string":
-                assert value == string
+                assert message["value"] == string
             elif kind == "double":
-                assert value == (double if math.isfinite(double) else None)
+                assert message["value"] == (double if math.isfinite(double) else None)
+            else:
+                want = None if binary is None else base64.b64encode(binary).decode()
+                assert message["value"] == want
 
 
 def test_derived_json_text_is_what_json_encode_writes() -> None:
