@@ -175,16 +175,20 @@ def _typed(frame: pl.DataFrame, binary: pl.Series | None) -> pl.DataFrame:
     import polars as pl
 
     sources = frame["source"].unique()
-    community = sources.str.extract(r"@([^@]*)$").fill_null("")
+    communities = sources.str.extract(r"@([^@]*)$").fill_null("")
+    # Most logs mark no community: then there is nothing to look up row by row.
+    community = (
+        pl.col("source").replace_strict(sources, communities, return_dtype=pl.String)
+        if communities.str.len_bytes().max()
+        else pl.lit("", pl.String)
+    )
     out = frame.select(
         "time",
         "offset",
         pl.col("var").alias("variable"),
         pl.col("src").alias("source"),
         "aux",
-        pl.col("source")
-        .replace_strict(sources, community, return_dtype=pl.String)
-        .alias("community"),
+        community.alias("community"),
         pl.col("type").cast(pl.String),
         "double",
         pl.when(pl.col("type") != "double").then(pl.col("text")).alias("string"),
