@@ -70,11 +70,11 @@ def prepare_package(path: Path) -> list[tuple[str, int, bytes]]:
     source = resolve([path]).sources[0]
     base = logstart_ns(source.logstart or 0.0)
     rows: list[tuple[str, int, bytes]] = []
-    for frame in entry_frames(source, Tally()):
+    for frame in entry_frames(source, Tally(), split=False):
         part = frame.select(
             "variable",
             ((pl.col("offset") * 1e9).round().cast(pl.Int64) + base).alias("t"),
-            _json().cast(pl.Binary).alias("d"),
+            _json(frame["source"].unique()).cast(pl.Binary).alias("d"),
         )
         rows.extend(part.iter_rows())
     return rows

@@ -33,6 +33,7 @@ from fleetlog.export.foxglove import (
     schema_bytes,
 )
 from fleetlog.export.mcapfile import McapWriter
+from fleetlog.moos.alog import split_source
 from fleetlog.storage.columnar import Errors
 
 if TYPE_CHECKING:
@@ -90,18 +91,24 @@ def _channel_ids(ids: dict[str, int]) -> pl.Expr:
     return index.replace_strict(list(range(len(cids))), cids, return_dtype=pl.UInt16)
 
 
-#: What JSON text escapes in a string (all that json_encode escapes): a string without any
-#: of these is its own JSON text between quotes.
-_ESCAPED = r'[\x00-\x1f"\\]'
+def _rests(sources: pl.Series) -> pl.Series:
+    """The text after the value, ``,"source":…,"aux":…,"community":…}``, of each source column."""
+    import polars as pl
+
+    parts = [split_source(text) for text in sources.to_list()]
+    names = pl.DataFrame(
+        parts, schema={"source": pl.String, "aux": pl.String, "community": pl.String}, orient="row"
+    )
+    encoded = pl.struct("source", "aux", "community").struct.json_encode().str.slice(1)
+    return names.select(pl.concat_str(pl.lit(","), encoded)).to_series()
 
 
-def _json(*, plain_sources: bool = False, binary: bool = True) -> pl.Expr:
+def _json(sources: pl.Series, *, binary: bool = True) -> pl.Expr:
     """The message text of each row (``{value, source, aux, community}``).
 
-    ``json_encode`` writes the strings (escaping them), unless the caller knows that no
-    source, aux or community needs escaping (``plain_sources``): those are then written
-    between quotes as they are, the same text at half the cost. ``binary``: the rows may
-    hold binary values (written in base64).
+    ``source`` is the column as written; ``sources`` its distinct values (a log has a few),
+    each split and written once, then looked up by row. ``binary``: the rows may hold binary
+    values (written in base64).
     """
     import polars as pl
 
@@ -118,35 +125,15 @@ def _json(*, plain_sources: bool = False, binary: bool = True) -> pl.Expr:
                 pl.when(col("binary").is_not_null()).then(encoded).otherwise(pl.lit("null"))
             )
         )
-    value = pl.coalesce(*branches, text)
-    if plain_sources:
-        rest: list[pl.Expr] = [
-            pl.lit(',"source":"'),
-            col("source"),
-            pl.lit('","aux":"'),
-            col("aux"),
-            pl.lit('","community":"'),
-            col("community"),
-            pl.lit('"}'),
-        ]
-    else:
-        rest = [
-            pl.lit(","),
-            pl.struct("source", "aux", "community").struct.json_encode().str.slice(1),
-        ]
-    return pl.concat_str(pl.lit('{"value":'), value, *rest)
+    rest = col("source").replace_strict(sources, _rests(sources), return_dtype=pl.String)
+    return pl.concat_str(pl.lit('{"value":'), pl.coalesce(*branches, text), rest)
 
 
 def _messages(frame: pl.DataFrame, channel: pl.Expr) -> pl.DataFrame:
     """The batch of messages of a frame of entries (made by a worker of the writer)."""
     import polars as pl
 
-    # A few distinct names each: cheap to look at (the string values are not: json_encode
-    # costs less than finding whether they need it).
-    plain = not any(
-        frame[name].unique().str.contains(_ESCAPED).any() for name in ("source", "aux", "community")
-    )
-    data = _json(plain_sources=plain, binary=bool(frame["type"].eq("binary").any()))
+    data = _json(frame["source"].unique(), binary=bool(frame["type"].eq("binary").any()))
     return frame.select(channel.alias("channel"), pl.col("log_time"), data.alias("data"))
 
 
@@ -206,12 +193,17 @@ def export_mcap(
         for source in sources:
             if source.logstart is None:
                 # Read it anyway: the tally counts its entries as untimed, and its warnings.
-                for frame in entry_frames(source, tally, errors=errors, selection=selection):
+                frames = entry_frames(
+                    source, tally, errors=errors, selection=selection, split=False
+                )
+                for frame in frames:
                     result.untimed += frame.height
                 continue
             base = logstart_ns(source.logstart)
             log_time = (pl.col("offset") * 1e9).round().cast(pl.Int64, strict=False) + base
-            for frame in entry_frames(source, tally, errors=errors, selection=selection):
+            # Sources as written: each distinct one is split once, by the worker (_json).
+            frames = entry_frames(source, tally, errors=errors, selection=selection, split=False)
+            for frame in frames:
                 timed = _timed(frame.with_columns(log_time=log_time))
                 result.untimed += frame.height - timed.height
                 if not timed.height:

@@ -225,63 +225,60 @@ def test_numpy_and_pure_python_assembly_write_the_same_bytes() -> None:
     assert sum(1 for _ in reader.iter_messages()) == n + 7 + 2
 
 
-def test_message_text_without_escapes_is_what_json_encode_writes() -> None:
-    # Sources, aux and communities that need no escaping are written between quotes as they
-    # are; json_encode (the general text, _json()) is the oracle, for each escaped character
-    # alone among plain names.
-    from fleetlog.export.tomcap import _json, _messages
+def test_message_text_splits_each_source_and_escapes_every_string() -> None:
+    # Each distinct source column is split and written once, then looked up by row: every
+    # message must still carry its own row's source, aux, community and value, whatever
+    # characters they hold.
+    from fleetlog.export.tomcap import _messages
+    from fleetlog.moos.alog import split_source
 
     rng = random.Random(7)
-    plain = ["", "pNav", "é ü 😀", "a/b", "\x7f", "\u2028", "<b>&"]
-    escaped = ['say "hi"', "back\\slash", "tab\t", "nl\n", "\x00", "\x1f"]
+    texts = ["", "pNav", "é ü 😀", "a/b", "\x7f", "\u2028", 'say "hi"', "back\\slash", "tab\t"]
+    texts += ["nl\n", "\x00", "\x1f"]
+    sources = ["pNav", "pHelm:HELM_INIT", "pMV@shoreside", "a:b:c@d@e", ":@", *texts]
+    sources += [f"{a}:{b}@{c}" for a, b, c in zip(texts, reversed(texts), texts[3:], strict=False)]
     specials = [float("nan"), float("inf"), -float("inf"), -0.0, 1e-7, 1e300, 3.0]
-
-    def frame(sources: list[str], binary: bool) -> pl.DataFrame:
-        rows = []
-        for _ in range(300):
-            kind = rng.choice(["double", "string", "binary"] if binary else ["double", "string"])
-            text = rng.choice(plain + escaped)
-            rows.append(
-                {
-                    "log_time": rng.randint(0, 10**12),
-                    "source": rng.choice(sources),
-                    "aux": rng.choice(sources),
-                    "community": rng.choice(sources),
-                    "type": kind,
-                    "double": rng.choice(specials) if kind == "double" else None,
-                    "string": None if kind == "double" else text,
-                    "binary": (rng.choice([text.encode(), None]) if kind == "binary" else None),
-                }
-            )
-        return pl.DataFrame(
-            rows,
-            schema={
-                "log_time": pl.UInt64,
-                "source": pl.String,
-                "aux": pl.String,
-                "community": pl.String,
-                "type": pl.String,
-                "double": pl.Float64,
-                "string": pl.String,
-                "binary": pl.Binary,
-            },
+    rows = []
+    for _ in range(2000):
+        kind = rng.choice(["double", "string", "binary"])
+        text = rng.choice(texts)
+        rows.append(
+            {
+                "log_time": rng.randint(0, 10**12),
+                "source": rng.choice(sources),
+                "type": kind,
+                "double": rng.choice(specials) if kind == "double" else None,
+                "string": None if kind == "double" else text,
+                "binary": rng.choice([text.encode(), None]) if kind == "binary" else None,
+            }
         )
-
-    cases = [frame(plain, False), frame(plain, True)]
-    cases += [frame([*plain, one], binary) for one in escaped for binary in (False, True)]
-    for f in cases:
-        got = _messages(f, pl.lit(0, pl.UInt16))["data"].to_list()
-        assert got == f.select(_json()).to_series().to_list()
-        for text, (kind, double, string, binary, source) in zip(
-            got, f.select("type", "double", "string", "binary", "source").iter_rows(), strict=True
-        ):
+    schema = {
+        "log_time": pl.UInt64,
+        "source": pl.String,
+        "type": pl.String,
+        "double": pl.Float64,
+        "string": pl.String,
+        "binary": pl.Binary,
+    }
+    whole = pl.DataFrame(rows, schema=schema)
+    for frame in (whole, whole.filter(pl.col("type") != "binary"), whole.head(1)):
+        got = _messages(frame, pl.lit(0, pl.UInt16))["data"].to_list()
+        assert len(got) == frame.height
+        for text, row in zip(got, frame.iter_rows(named=True), strict=True):
             message = json.loads(text)
-            assert message["source"] == source
-            if kind == "string":
-                assert message["value"] == string
-            elif kind == "double":
-                assert message["value"] == (double if math.isfinite(double) else None)
+            src, aux, community = split_source(row["source"])
+            assert (message["source"], message["aux"], message["community"]) == (
+                src,
+                aux,
+                community,
+            )
+            if row["type"] == "string":
+                assert message["value"] == row["string"]
+            elif row["type"] == "double":
+                finite = math.isfinite(row["double"])
+                assert message["value"] == (row["double"] if finite else None)
             else:
+                binary = row["binary"]
                 want = None if binary is None else base64.b64encode(binary).decode()
                 assert message["value"] == want
 
