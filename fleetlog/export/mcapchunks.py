@@ -99,7 +99,9 @@ def _records(data: pl.Series, heads: Any, np: Any) -> Any:
     import polars as pl
 
     fixed = pl.Series(heads.view(np.uint8).reshape(len(heads), _RECORD_FIXED))
-    records = fixed.cast(pl.List(pl.UInt8)).cast(pl.Binary) + data
+    # One chunk (cheap for views), so that the exploded bytes are the list's own buffer:
+    # a batch's text often comes in two, and exploding those copied every byte once more.
+    records = fixed.cast(pl.List(pl.UInt8)).cast(pl.Binary) + data.rechunk()
     # A record is never empty (its header), so the exploded bytes are all of them, in order.
     return records.cast(pl.List(pl.UInt8)).explode().to_numpy()
 
