@@ -125,7 +125,10 @@ def _json(sources: pl.Series, *, binary: bool = True) -> pl.Expr:
                 pl.when(col("binary").is_not_null()).then(encoded).otherwise(pl.lit("null"))
             )
         )
-    rest = col("source").replace_strict(sources, _rests(sources), return_dtype=pl.String)
+    # Each row's index among the distinct sources (an Enum cast: one hash lookup, half the
+    # cost of a string replace_strict), then its text by that index.
+    index = col("source").cast(pl.Enum(sources)).to_physical()
+    rest = pl.lit(_rests(sources)).gather(index)
     return pl.concat_str(pl.lit('{"value":'), pl.coalesce(*branches, text), rest)
 
 
