@@ -160,7 +160,8 @@ def _wide(nav: pl.DataFrame, needed: tuple[str, ...], optional: tuple[str, ...])
             ),
         )
         .with_columns(pl.exclude("log_time").forward_fill())
-        .unique("log_time", keep="last", maintain_order=True)
+        # the last row of each time (the rows are in time order: no hashing needed)
+        .filter(pl.col("log_time").ne_missing(pl.col("log_time").shift(-1)))
     )
     for name in optional:
         if name not in wide.columns:

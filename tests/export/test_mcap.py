@@ -329,6 +329,43 @@ def test_derived_json_text_is_what_json_encode_writes() -> None:
         assert all(isinstance(json.loads(text), dict) for text in got)
 
 
+def test_derived_rows_are_the_latest_values_at_each_time() -> None:
+    # The oracle is a pivot (the last value posted at each time, forward-filled): times
+    # repeated and out of file order, NaN values, variables missing at first.
+    from fleetlog.export.foxglove import _wide
+
+    rng = random.Random(11)
+    for _ in range(150):
+        names = rng.sample(["NAV_X", "NAV_Y", "NAV_HEADING", "NAV_Z", "OTHER"], rng.randint(1, 5))
+        t, rows = 0, []
+        for i in range(rng.randint(0, 60)):
+            t = max(0, t + (rng.choice([0, 0, 1, 2]) if rng.random() < 0.9 else -rng.randint(0, 3)))
+            rows.append((t, rng.choice(names), rng.choice([float(i), float("nan"), -float(i)])))
+        nav = pl.DataFrame(
+            rows,
+            schema={"log_time": pl.UInt64, "variable": pl.String, "double": pl.Float64},
+            orient="row",
+        )
+        for needed, optional in ((("NAV_X", "NAV_Y", "NAV_HEADING"), ("NAV_Z",)), (("NAV_X",), ())):
+            got = _wide(nav, needed, optional)
+            present = set(nav["variable"].to_list())
+            if not set(needed) <= present:
+                assert got.height == 0
+                continue
+            want = (
+                nav.filter(pl.col("variable").is_in([*needed, *optional]))
+                .pivot(on="variable", index="log_time", values="double", aggregate_function="last")
+                .sort("log_time")
+                .with_columns(pl.exclude("log_time").forward_fill())
+            )
+            for name in optional:
+                if name not in want.columns:
+                    want = want.with_columns(pl.lit(0.0).alias(name))
+            want = want.drop_nulls(list(needed)).with_columns(pl.col(list(optional)).fill_null(0.0))
+            columns = ["log_time", *needed, *optional]
+            assert got.select(columns).equals(want.select(columns)), nav
+
+
 def test_derived_channels_in_slices_and_the_same_file_every_time(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch
 ) -> None:
