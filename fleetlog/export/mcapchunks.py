@@ -20,6 +20,7 @@ compressing and placing them in the file is the writer's.
 
 from __future__ import annotations
 
+import functools
 import struct
 from dataclasses import dataclass
 from itertools import chain, pairwise, repeat
@@ -89,9 +90,21 @@ def build_chunks(batch: pl.DataFrame, first: int, chunk_size: int, numpy: Any) -
         numpy: the numpy module to assemble with, or None.
     """
     frame = _prepared(batch)
-    if numpy is not None:
+    if numpy is not None and _casts_bytes():
         return _with_numpy(frame, first, chunk_size, numpy)
     return _pure(frame, first, chunk_size)
+
+
+@functools.cache
+def _casts_bytes() -> bool:
+    """Whether polars casts a list of bytes to Binary (1.30 and later), as _records needs."""
+    import polars as pl
+
+    try:
+        pl.Series([[1]], dtype=pl.List(pl.UInt8)).cast(pl.Binary)
+    except pl.exceptions.InvalidOperationError:
+        return False
+    return True
 
 
 def _records(data: pl.Series, heads: Any, np: Any) -> Any:
