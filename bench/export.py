@@ -3,7 +3,8 @@
 The issue's target: exporting 1M entries to Parquet and to MCAP takes at most 2x the time of
 reading them with the columnar reader. Per round, interleaved:
 
-(a) read: ``AlogReader.batches()`` of the columns an export reads (the baseline);
+(a) read: ``AlogReader.batches()`` of the nine columns the Parquet export reads (the
+    baseline; the MCAP export reads seven of them, the source column unsplit);
 (b) parquet: ``fleetlog.export.write_parquet`` of the log to a file (tmp dir);
 (c) mcap: ``fleetlog.export.export_mcap`` of the log to a file, Foxglove position channels
     included;
