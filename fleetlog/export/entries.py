@@ -56,6 +56,8 @@ COLUMNS: dict[str, str] = {
     "binary": "Binary",
 }
 _READ = ("time", "offset", "var", "source", "src", "aux", "type", "double", "text")
+#: What is read when the consumer splits each distinct source itself (no per-row split).
+_READ_WHOLE = ("time", "offset", "var", "source", "type", "double", "text")
 
 
 @dataclass
@@ -124,6 +126,7 @@ def entry_frames(
     errors: Errors = "skip",
     selection: Select = None,
     payloads: bool = True,
+    split: bool = True,
 ) -> Iterator[pl.DataFrame]:
     """Yield a log's entries as frames of :data:`COLUMNS`, in file order.
 
@@ -134,6 +137,10 @@ def entry_frames(
         selection: keep only these variables, sources and times (or a function of the
             log that says which).
         payloads: read binary payloads from the blog (else ``binary`` is null).
+        split: split the source column into ``source``, ``aux`` and ``community``. If
+            False, ``source`` is the column as written (``src[:aux][@community]``) and there
+            is no ``aux`` or ``community``: for a consumer that splits each distinct source
+            once rather than every row (:func:`fleetlog.moos.alog.split_source`).
 
     Raises:
         StorageError: the log cannot be read, or (``errors="raise"``) it is corrupt.
@@ -148,7 +155,7 @@ def entry_frames(
     with AlogReader(source.path, errors=errors) as reader:
         if reader.logstart is None:
             tally.no_logstart.append(name)
-        for batch in reader.frames(_READ, where=where):
+        for batch in reader.frames(_READ if split else _READ_WHOLE, where=where):
             frame = batch.frame
             if not frame.height:
                 continue
@@ -165,7 +172,7 @@ def entry_frames(
             if payloads and frame["type"].eq("binary").any():
                 binary = pl.Series("binary", _payloads(reader, frame, tally), dtype=pl.Binary)
             tally.entries += frame.height
-            yield _typed(frame, binary)
+            yield _typed(frame, binary) if split else _whole(frame, binary)
         tally.skipped += reader.skipped
         if reader.truncated:
             tally.truncated.append(name)
@@ -175,20 +182,45 @@ def _typed(frame: pl.DataFrame, binary: pl.Series | None) -> pl.DataFrame:
     import polars as pl
 
     sources = frame["source"].unique()
-    community = sources.str.extract(r"@([^@]*)$").fill_null("")
+    communities = sources.str.extract(r"@([^@]*)$").fill_null("")
+    # Most logs mark no community: then there is nothing to look up row by row.
+    community = (
+        pl.col("source").replace_strict(sources, communities, return_dtype=pl.String)
+        if communities.str.len_bytes().max()
+        else pl.lit("", pl.String)
+    )
     out = frame.select(
         "time",
         "offset",
         pl.col("var").alias("variable"),
         pl.col("src").alias("source"),
         "aux",
-        pl.col("source")
-        .replace_strict(sources, community, return_dtype=pl.String)
-        .alias("community"),
+        community.alias("community"),
         pl.col("type").cast(pl.String),
         "double",
         pl.when(pl.col("type") != "double").then(pl.col("text")).alias("string"),
     )
+    return _with_binary(out, binary)
+
+
+def _whole(frame: pl.DataFrame, binary: pl.Series | None) -> pl.DataFrame:
+    import polars as pl
+
+    out = frame.select(
+        "time",
+        "offset",
+        pl.col("var").alias("variable"),
+        "source",
+        pl.col("type").cast(pl.String),
+        "double",
+        pl.when(pl.col("type") != "double").then(pl.col("text")).alias("string"),
+    )
+    return _with_binary(out, binary)
+
+
+def _with_binary(frame: pl.DataFrame, binary: pl.Series | None) -> pl.DataFrame:
+    import polars as pl
+
     if binary is None:
-        return out.with_columns(pl.lit(None, dtype=pl.Binary).alias("binary"))
-    return out.with_columns(binary)
+        return frame.with_columns(pl.lit(None, dtype=pl.Binary).alias("binary"))
+    return frame.with_columns(binary)

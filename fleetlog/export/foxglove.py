@@ -142,12 +142,26 @@ def _wide(nav: pl.DataFrame, needed: tuple[str, ...], optional: tuple[str, ...])
 
     wanted = [*needed, *optional]
     rows = nav.filter(pl.col("variable").is_in(wanted))
-    if not set(needed) <= set(rows["variable"].unique().to_list()):
+    present = set(rows["variable"].unique().to_list())
+    if not set(needed) <= present:
         return pl.DataFrame()
+    if not rows["log_time"].is_sorted():
+        rows = rows.sort("log_time", maintain_order=True)  # file order among equal times
+    # Each row carries the latest value of every variable so far (a forward fill); the last
+    # row of a time then has the last value posted at it, or the latest before. (A pivot
+    # did the same at three times the cost.)
     wide = (
-        rows.pivot(on="variable", index="log_time", values="double", aggregate_function="last")
-        .sort("log_time")
+        rows.select(
+            "log_time",
+            *(
+                pl.when(pl.col("variable") == name).then(pl.col("double")).alias(name)
+                for name in wanted
+                if name in present
+            ),
+        )
         .with_columns(pl.exclude("log_time").forward_fill())
+        # the last row of each time (the rows are in time order: no hashing needed)
+        .filter(pl.col("log_time").ne_missing(pl.col("log_time").shift(-1)))
     )
     for name in optional:
         if name not in wide.columns:

@@ -7,10 +7,10 @@ Message Index records (per channel, in channel order, (log time, offset) in time
 
 Two ways to assemble, giving the same bytes (a test holds it):
 
-* with numpy (an optional accelerator): headers written as one structured array; where each
-  header and each message's data go is one boolean mask made by ``numpy.repeat`` of the
-  records' lengths, so both are copied by two masked assignments; the indexes are a stable
-  argsort of each chunk's channels. No Python object per message.
+* with numpy (an optional accelerator): headers written as one structured array, each
+  joined to its message's data by polars (a Binary ``+``), and the records laid end to end
+  by exploding them as lists of bytes (copies in Rust, not masked numpy assignments); the
+  indexes are a stable argsort of each chunk's channels. No Python object per message.
 * without it: the headers packed by one precompiled :class:`struct.Struct` mapped over the
   batch and joined with the data (a loop in C, still a few Python objects per message).
 
@@ -20,6 +20,7 @@ compressing and placing them in the file is the writer's.
 
 from __future__ import annotations
 
+import functools
 import struct
 from dataclasses import dataclass
 from itertools import chain, pairwise, repeat
@@ -70,23 +71,11 @@ def _prepared(batch: pl.DataFrame) -> pl.DataFrame:
     frame = batch.select(
         pl.col("channel").cast(pl.UInt16),
         pl.col("log_time").cast(pl.UInt64),
-        "data",
+        pl.col("data").cast(pl.Binary).fill_null(b""),  # no data: an empty message
     )
     if not frame["log_time"].is_sorted():
         frame = frame.sort("log_time", maintain_order=True)
     return frame
-
-
-def _text(data: pl.Series) -> pl.Series | None:
-    """The data as UTF-8 text, or None (bytes that are not: the pure path copes)."""
-    import polars as pl
-
-    if data.dtype == pl.String:
-        return data
-    try:
-        return data.cast(pl.String)
-    except pl.exceptions.PolarsError:
-        return None
 
 
 def build_chunks(batch: pl.DataFrame, first: int, chunk_size: int, numpy: Any) -> list[Chunk]:
@@ -101,21 +90,39 @@ def build_chunks(batch: pl.DataFrame, first: int, chunk_size: int, numpy: Any) -
         numpy: the numpy module to assemble with, or None.
     """
     frame = _prepared(batch)
-    if numpy is not None:
-        text = _text(frame["data"])
-        if text is not None:
-            return _with_numpy(frame, text, first, chunk_size, numpy)
+    if numpy is not None and _casts_bytes():
+        return _with_numpy(frame, first, chunk_size, numpy)
     return _pure(frame, first, chunk_size)
 
 
-def _with_numpy(
-    frame: pl.DataFrame, text: pl.Series, first: int, chunk_size: int, np: Any
-) -> list[Chunk]:
+@functools.cache
+def _casts_bytes() -> bool:
+    """Whether polars casts a list of bytes to Binary (1.30 and later), as _records needs."""
     import polars as pl
 
+    try:
+        pl.Series([[1]], dtype=pl.List(pl.UInt8)).cast(pl.Binary)
+    except pl.exceptions.InvalidOperationError:
+        return False
+    return True
+
+
+def _records(data: pl.Series, heads: Any, np: Any) -> Any:
+    """Every header followed by its message's data, end to end, as one numpy byte array."""
+    import polars as pl
+
+    fixed = pl.Series(heads.view(np.uint8).reshape(len(heads), _RECORD_FIXED))
+    # One chunk (cheap for views), so that the exploded bytes are the list's own buffer:
+    # a batch's text often comes in two, and exploding those copied every byte once more.
+    records = fixed.cast(pl.List(pl.UInt8)).cast(pl.Binary) + data.rechunk()
+    # A record is never empty (its header), so the exploded bytes are all of them, in order.
+    return records.cast(pl.List(pl.UInt8)).explode().to_numpy()
+
+
+def _with_numpy(frame: pl.DataFrame, first: int, chunk_size: int, np: Any) -> list[Chunk]:
     n = frame.height
-    blob = text.str.join("").cast(pl.Binary).item()
-    size = text.str.len_bytes().to_numpy().astype(np.int64) + _RECORD_FIXED
+    data = frame["data"]
+    size = data.bin.size().to_numpy().astype(np.int64) + _RECORD_FIXED
     at = np.cumsum(size) - size
     channels = frame["channel"].to_numpy()
     times = frame["log_time"].to_numpy()
@@ -126,14 +133,7 @@ def _with_numpy(
     heads["sequence"] = np.arange(first, first + n, dtype="<u8") & 0xFFFFFFFF
     heads["log_time"] = times
     heads["publish_time"] = times
-    # Which bytes are data: header and data lengths alternate, so one repeat gives the mask.
-    lengths = np.empty(2 * n, dtype=np.int64)
-    lengths[0::2] = _RECORD_FIXED
-    lengths[1::2] = size - _RECORD_FIXED
-    is_data = np.repeat(np.tile(np.array([False, True]), n), lengths)
-    out = np.empty(is_data.size, dtype=np.uint8)
-    out[is_data] = np.frombuffer(blob, dtype=np.uint8)
-    out[~is_data] = heads.view(np.uint8)
+    out = _records(data, heads, np)
     part = at // chunk_size
     bounds = [0, *(np.flatnonzero(part[1:] != part[:-1]) + 1).tolist(), n]
     chunks = []
@@ -167,8 +167,7 @@ def _pure(frame: pl.DataFrame, first: int, chunk_size: int) -> list[Chunk]:
     import polars as pl
 
     frame = (
-        frame.with_columns(pl.col("data").cast(pl.Binary))
-        .with_columns(size=(pl.col("data").bin.size() + _RECORD_FIXED).cast(pl.UInt64))
+        frame.with_columns(size=(pl.col("data").bin.size() + _RECORD_FIXED).cast(pl.UInt64))
         .with_columns(at=pl.col("size").cum_sum() - pl.col("size"))
         .with_columns(part=(pl.col("at") // chunk_size).rle_id())
         .with_columns(offset=pl.col("at") - pl.col("at").min().over("part"))

@@ -24,6 +24,7 @@ import struct
 import threading
 import zlib
 from collections import deque
+from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, BinaryIO
@@ -52,6 +53,9 @@ from fleetlog.export.mcaprecords import (
 
 if TYPE_CHECKING:
     import polars as pl
+
+    #: A batch of messages, or what computes it.
+    _Batch = pl.DataFrame | pl.LazyFrame | Callable[[], pl.DataFrame]
 
 __all__ = ["CHUNK_SIZE", "MAGIC", "McapWriter"]
 
@@ -179,11 +183,11 @@ class McapWriter:
         self._sequence += batch.height
         self._submit(batch, first)
 
-    def write_lazy(self, batch: pl.LazyFrame, height: int) -> None:
+    def write_lazy(self, batch: pl.LazyFrame | Callable[[], pl.DataFrame], height: int) -> None:
         """Like :meth:`write_batch`, the batch computed by the worker thread.
 
         Args:
-            batch: a query giving the columns of :meth:`write_batch`.
+            batch: a query, or a function, giving the columns of :meth:`write_batch`.
             height: the rows it gives (its messages' sequence numbers are given here).
         """
         if not height:
@@ -192,17 +196,19 @@ class McapWriter:
         self._sequence += height
         self._submit(batch, first)
 
-    def _submit(self, batch: pl.DataFrame | pl.LazyFrame, first: int) -> None:
+    def _submit(self, batch: _Batch, first: int) -> None:
         self._pending.append(self._pool.submit(self._build, batch, first))
         # Placed only by count, never by the threads' timing: the file's bytes do not vary.
         while len(self._pending) > _IN_FLIGHT:
             self._place(self._pending.popleft().result())
 
-    def _build(self, batch: pl.DataFrame | pl.LazyFrame, first: int) -> list[_Packed]:
+    def _build(self, batch: _Batch, first: int) -> list[_Packed]:
         import polars as pl
 
         if isinstance(batch, pl.LazyFrame):
             batch = batch.collect()
+        elif callable(batch):
+            batch = batch()
         compressor = getattr(self._local, "zstd", None)
         if compressor is None:
             compressor = self._local.zstd = self._zstandard.ZstdCompressor(level=self._level)

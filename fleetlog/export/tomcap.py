@@ -18,6 +18,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from decimal import Decimal
+from functools import partial
 from typing import TYPE_CHECKING, BinaryIO
 
 from fleetlog import __version__
@@ -32,6 +33,7 @@ from fleetlog.export.foxglove import (
     schema_bytes,
 )
 from fleetlog.export.mcapfile import McapWriter
+from fleetlog.moos.alog import split_source
 from fleetlog.storage.columnar import Errors
 
 if TYPE_CHECKING:
@@ -89,28 +91,53 @@ def _channel_ids(ids: dict[str, int]) -> pl.Expr:
     return index.replace_strict(list(range(len(cids))), cids, return_dtype=pl.UInt16)
 
 
-def _json() -> pl.Expr:
-    """The message text of each row (``{value, source, aux, community}``)."""
+def _rests(sources: pl.Series) -> pl.Series:
+    """The text after the value, ``,"source":…,"aux":…,"community":…}``, of each source column."""
     import polars as pl
 
-    text = pl.struct(pl.col("string").alias("v")).struct.json_encode()
-    value = (
-        pl.when(pl.col("type") == "double")
-        .then(
-            pl.when(pl.col("double").is_finite())
-            .then(pl.col("double").cast(pl.String))
-            .otherwise(pl.lit("null"))
-        )
-        .when(pl.col("type") == "binary")
-        .then(
-            pl.when(pl.col("binary").is_not_null())
-            .then(pl.concat_str(pl.lit('"'), pl.col("binary").bin.encode("base64"), pl.lit('"')))
-            .otherwise(pl.lit("null"))
-        )
-        .otherwise(text.str.slice(5).str.head(-1))
+    parts = [split_source(text) for text in sources.to_list()]
+    names = pl.DataFrame(
+        parts, schema={"source": pl.String, "aux": pl.String, "community": pl.String}, orient="row"
     )
-    rest = pl.struct("source", "aux", "community").struct.json_encode().str.slice(1)
-    return pl.concat_str(pl.lit('{"value":'), value, pl.lit(","), rest)
+    encoded = pl.struct("source", "aux", "community").struct.json_encode().str.slice(1)
+    return names.select(pl.concat_str(pl.lit(","), encoded)).to_series()
+
+
+def _json(sources: pl.Series, *, binary: bool = True) -> pl.Expr:
+    """The message text of each row (``{value, source, aux, community}``).
+
+    ``source`` is the column as written; ``sources`` its distinct values (a log has a few),
+    each split and written once, then looked up by row. ``binary``: the rows may hold binary
+    values (written in base64).
+    """
+    import polars as pl
+
+    col = pl.col
+    text = pl.struct(col("string").alias("v")).struct.json_encode().str.slice(5).str.head(-1)
+    # Each branch is null where it does not apply: a double's text where it is finite, a
+    # binary's base64 (or null); then a string's text, which is "null" for a double (its
+    # ``string`` is null) and a binary's reference (its branch comes first).
+    branches = [pl.when(col("double").is_finite()).then(col("double").cast(pl.String))]
+    if binary:
+        encoded = pl.concat_str(pl.lit('"'), col("binary").bin.encode("base64"), pl.lit('"'))
+        branches.append(
+            pl.when(col("type") == "binary").then(
+                pl.when(col("binary").is_not_null()).then(encoded).otherwise(pl.lit("null"))
+            )
+        )
+    # Each row's index among the distinct sources (an Enum cast: one hash lookup, half the
+    # cost of a string replace_strict), then its text by that index.
+    index = col("source").cast(pl.Enum(sources)).to_physical()
+    rest = pl.lit(_rests(sources)).gather(index)
+    return pl.concat_str(pl.lit('{"value":'), pl.coalesce(*branches, text), rest)
+
+
+def _messages(frame: pl.DataFrame, channel: pl.Expr) -> pl.DataFrame:
+    """The batch of messages of a frame of entries (made by a worker of the writer)."""
+    import polars as pl
+
+    data = _json(frame["source"].unique(), binary=bool(frame["type"].eq("binary").any()))
+    return frame.select(channel.alias("channel"), pl.col("log_time"), data.alias("data"))
 
 
 class _Channels:
@@ -169,12 +196,17 @@ def export_mcap(
         for source in sources:
             if source.logstart is None:
                 # Read it anyway: the tally counts its entries as untimed, and its warnings.
-                for frame in entry_frames(source, tally, errors=errors, selection=selection):
+                frames = entry_frames(
+                    source, tally, errors=errors, selection=selection, split=False
+                )
+                for frame in frames:
                     result.untimed += frame.height
                 continue
             base = logstart_ns(source.logstart)
             log_time = (pl.col("offset") * 1e9).round().cast(pl.Int64, strict=False) + base
-            for frame in entry_frames(source, tally, errors=errors, selection=selection):
+            # Sources as written: each distinct one is split once, by the worker (_json).
+            frames = entry_frames(source, tally, errors=errors, selection=selection, split=False)
+            for frame in frames:
                 timed = _timed(frame.with_columns(log_time=log_time))
                 result.untimed += frame.height - timed.height
                 if not timed.height:
@@ -182,14 +214,8 @@ def export_mcap(
                 ids = channels.of(
                     source.vehicle, source.session, timed["variable"].unique().sort().to_list()
                 )
-                channel = _channel_ids(ids)
                 # The JSON text is made by the writer's worker while this thread reads on.
-                writer.write_lazy(
-                    timed.lazy().select(
-                        channel.alias("channel"), "log_time", _json().alias("data")
-                    ),
-                    timed.height,
-                )
+                writer.write_lazy(partial(_messages, timed, _channel_ids(ids)), timed.height)
                 if positions:
                     wanted = timed.filter(
                         pl.col("variable").is_in(list(NAV_VARS)) & (pl.col("type") == "double")

@@ -211,10 +211,10 @@ def test_numpy_and_pure_python_assembly_write_the_same_bytes() -> None:
             writer.add_channel(f"/c{i}", "json", sid)
         writer.write_batch(frame)
         writer.write_batch(frame.head(7))
-        # bytes that are not UTF-8 text take the pure-Python path in either writer
+        # bytes that are not UTF-8 text, and a message without data
         writer.write_batch(
             pl.DataFrame(
-                {"channel": [1], "log_time": [5], "data": [b"\xff\xfe"]},
+                {"channel": [1, 2], "log_time": [5, 6], "data": [b"\xff\xfe", None]},
                 schema={"channel": pl.UInt16, "log_time": pl.UInt64, "data": pl.Binary},
             )
         )
@@ -222,7 +222,65 @@ def test_numpy_and_pure_python_assembly_write_the_same_bytes() -> None:
         files.append(buf.getvalue())
     assert files[0] == files[1]
     reader = make_reader(io.BytesIO(files[1]), validate_crcs=True)
-    assert sum(1 for _ in reader.iter_messages()) == n + 7 + 1
+    assert sum(1 for _ in reader.iter_messages()) == n + 7 + 2
+
+
+def test_message_text_splits_each_source_and_escapes_every_string() -> None:
+    # Each distinct source column is split and written once, then looked up by row: every
+    # message must still carry its own row's source, aux, community and value, whatever
+    # characters they hold.
+    from fleetlog.export.tomcap import _messages
+    from fleetlog.moos.alog import split_source
+
+    rng = random.Random(7)
+    texts = ["", "pNav", "é ü 😀", "a/b", "\x7f", "\u2028", 'say "hi"', "back\\slash", "tab\t"]
+    texts += ["nl\n", "\x00", "\x1f"]
+    sources = ["pNav", "pHelm:HELM_INIT", "pMV@shoreside", "a:b:c@d@e", ":@", *texts]
+    sources += [f"{a}:{b}@{c}" for a, b, c in zip(texts, reversed(texts), texts[3:], strict=False)]
+    specials = [float("nan"), float("inf"), -float("inf"), -0.0, 1e-7, 1e300, 3.0]
+    rows = []
+    for _ in range(2000):
+        kind = rng.choice(["double", "string", "binary"])
+        text = rng.choice(texts)
+        rows.append(
+            {
+                "log_time": rng.randint(0, 10**12),
+                "source": rng.choice(sources),
+                "type": kind,
+                "double": rng.choice(specials) if kind == "double" else None,
+                "string": None if kind == "double" else text,
+                "binary": rng.choice([text.encode(), None]) if kind == "binary" else None,
+            }
+        )
+    schema = {
+        "log_time": pl.UInt64,
+        "source": pl.String,
+        "type": pl.String,
+        "double": pl.Float64,
+        "string": pl.String,
+        "binary": pl.Binary,
+    }
+    whole = pl.DataFrame(rows, schema=schema)
+    for frame in (whole, whole.filter(pl.col("type") != "binary"), whole.head(1)):
+        got = _messages(frame, pl.lit(0, pl.UInt16))["data"].to_list()
+        assert len(got) == frame.height
+        for text, row in zip(got, frame.iter_rows(named=True), strict=True):
+            message = json.loads(text)
+            src, aux, community = split_source(row["source"])
+            assert (message["source"], message["aux"], message["community"]) == (
+                src,
+                aux,
+                community,
+            )
+            if row["type"] == "string":
+                assert message["value"] == row["string"]
+            elif row["type"] == "double":
+                finite = math.isfinite(row["double"])
+                assert message["value"] == (row["double"] if finite else None)
+            else:
+                binary = row["binary"]
+                want = None if binary is None else base64.b64encode(binary).decode()
+                assert message["value"] == want
 
 
 def test_derived_json_text_is_what_json_encode_writes() -> None:
@@ -269,6 +327,43 @@ def test_derived_json_text_is_what_json_encode_writes() -> None:
         got = derived.frame()["data"].to_list()
         assert got == derived.rows.select(oracle).to_series().to_list()
         assert all(isinstance(json.loads(text), dict) for text in got)
+
+
+def test_derived_rows_are_the_latest_values_at_each_time() -> None:
+    # The oracle is a pivot (the last value posted at each time, forward-filled): times
+    # repeated and out of file order, NaN values, variables missing at first.
+    from fleetlog.export.foxglove import _wide
+
+    rng = random.Random(11)
+    for _ in range(150):
+        names = rng.sample(["NAV_X", "NAV_Y", "NAV_HEADING", "NAV_Z", "OTHER"], rng.randint(1, 5))
+        t, rows = 0, []
+        for i in range(rng.randint(0, 60)):
+            t = max(0, t + (rng.choice([0, 0, 1, 2]) if rng.random() < 0.9 else -rng.randint(0, 3)))
+            rows.append((t, rng.choice(names), rng.choice([float(i), float("nan"), -float(i)])))
+        nav = pl.DataFrame(
+            rows,
+            schema={"log_time": pl.UInt64, "variable": pl.String, "double": pl.Float64},
+            orient="row",
+        )
+        for needed, optional in ((("NAV_X", "NAV_Y", "NAV_HEADING"), ("NAV_Z",)), (("NAV_X",), ())):
+            got = _wide(nav, needed, optional)
+            present = set(nav["variable"].to_list())
+            if not set(needed) <= present:
+                assert got.height == 0
+                continue
+            want = (
+                nav.filter(pl.col("variable").is_in([*needed, *optional]))
+                .pivot(on="variable", index="log_time", values="double", aggregate_function="last")
+                .sort("log_time")
+                .with_columns(pl.exclude("log_time").forward_fill())
+            )
+            for name in optional:
+                if name not in want.columns:
+                    want = want.with_columns(pl.lit(0.0).alias(name))
+            want = want.drop_nulls(list(needed)).with_columns(pl.col(list(optional)).fill_null(0.0))
+            columns = ["log_time", *needed, *optional]
+            assert got.select(columns).equals(want.select(columns)), nav
 
 
 def test_derived_channels_in_slices_and_the_same_file_every_time(
