@@ -14,8 +14,8 @@ played late and counted.
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Generator, Iterator, Sequence
-from typing import NamedTuple
+from collections.abc import Generator, Iterable, Iterator, Sequence
+from typing import Any, NamedTuple
 
 from fleetlog.errors import StorageError
 from fleetlog.moos.alog import BinaryRef, Entry
@@ -179,3 +179,24 @@ class Schedule:
         self._run.close()
         for records in self._passes:
             records.close()
+
+
+def plan(items: Iterable[Any]) -> list[tuple[object, ...]]:
+    """What a schedule plays, comparable between this one and fleetlog's.
+
+    Each entry's time, input, name, source, value, late mark and (binary values only: the
+    schedule in runs makes the others' payloads early) the bytes read from the blog.
+    """
+    from fleetlog.replayer.items import KEY, LATE, ORIGIN, PAYLOAD, SOURCE, TIME, VALUE
+
+    out: list[tuple[object, ...]] = []
+    for item in items:
+        if isinstance(item, Item):
+            entry = item.entry
+            fields = (item.time, item.origin, entry.key, entry.source, entry.value, item.late)
+            out.append((*fields, item.payload))
+        else:
+            binary = isinstance(item[VALUE], BinaryRef)
+            fields = tuple(item[i] for i in (TIME, ORIGIN, KEY, SOURCE, VALUE, LATE))
+            out.append((*fields, item[PAYLOAD] if binary else None))
+    return out

@@ -33,6 +33,8 @@ from hostile import (
     selector_keys,
 )
 from hypothesis import strategies as st
+from schedule_oracle import Schedule as OracleSchedule
+from schedule_oracle import plan
 
 from fleetlog.errors import FleetlogError, FormatError, MissionError
 from fleetlog.moos.alog import BinaryRef, source_field, split_source
@@ -42,6 +44,8 @@ from fleetlog.moos.slog_read import parse_slog
 from fleetlog.moos.ylog import parse_ylog
 from fleetlog.recorder.control import MAX_COPY_BYTES, MAX_LOG_REQUESTS
 from fleetlog.recorder.engine import Recorder
+from fleetlog.replayer.inputs import open_input
+from fleetlog.replayer.schedule import Schedule
 from fleetlog.storage.alogscan import read_head
 from fleetlog.storage.readers import AlogReader
 from fleetlog.storage.select import Selection
@@ -314,6 +318,7 @@ def check_alog_file(case: tuple[str, bytes]) -> None:
                 assert errors == "raise"
         with contextlib.suppress(FleetlogError):
             read_head(path)
+        check_schedule(path)
         text = data.decode("utf-8", "surrogateescape")
         list(iter_entries(text.split("\n")))
         for parse in (parse_slog, parse_ylog):
@@ -321,6 +326,32 @@ def check_alog_file(case: tuple[str, bytes]) -> None:
                 parse(text, str(path))
     finally:
         shutil.rmtree(where, ignore_errors=True)
+
+
+def _played(schedule: Any) -> tuple[object, ...]:
+    """What a replay schedule plays and counts, or the kind of error that stopped it."""
+    try:
+        items = plan(schedule)
+    except FleetlogError as err:
+        return (type(err).__name__,)
+    finally:
+        schedule.close()
+    return items, schedule.before_logstart, schedule.duplicates, schedule.late
+
+
+def check_schedule(path: Path) -> None:
+    """The replay's schedule plays a hostile log as the one it replaced did (the oracle)."""
+    try:
+        source = open_input(path, "fuzz", errors="skip")
+    except FleetlogError:
+        return  # no banner, no LOGSTART: the replay refuses it in words
+    try:
+        for window in (0, 3):
+            assert _played(Schedule([source], window=window, run=5)) == _played(
+                OracleSchedule([source], window=window)
+            )
+    finally:
+        source.close()
 
 
 def test_fuzz_alog_file(fuzz: Fuzzer) -> None:

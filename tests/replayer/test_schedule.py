@@ -9,19 +9,18 @@ marks and the same counts.
 
 from __future__ import annotations
 
-from collections.abc import Iterable, Sequence
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
 
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from replay_support import Line, write_session
 from schedule_oracle import Schedule as Oracle
+from schedule_oracle import plan
 
-from fleetlog.moos.alog import BinaryRef
 from fleetlog.replayer.inputs import ReplayInput, open_inputs
-from fleetlog.replayer.items import KEY, LATE, ORIGIN, PAYLOAD, SOURCE, TIME, VALUE, payload_expr
+from fleetlog.replayer.items import payload_expr
 from fleetlog.replayer.schedule import Schedule
 from fleetlog.wire.message import encode_value
 
@@ -70,41 +69,17 @@ def _write(base: Path, index: int, entries: Sequence[Line], vehicle: str) -> Pat
     return session
 
 
-def _plan(items: Iterable[Any]) -> list[tuple[object, ...]]:
-    """What a schedule plays: time, input, name, source, value, late, a binary's bytes."""
-    out: list[tuple[object, ...]] = []
-    for item in items:
-        if isinstance(item, tuple) and not hasattr(item, "entry"):  # the schedule in runs
-            fields = (TIME, ORIGIN, KEY, SOURCE, VALUE, LATE)
-            binary = isinstance(item[VALUE], BinaryRef)  # the others' payloads come early
-            out.append((*(item[i] for i in fields), item[PAYLOAD] if binary else None))
-        else:  # the oracle's Item(time, origin, entry, late, payload)
-            entry = item.entry
-            out.append(
-                (
-                    item.time,
-                    item.origin,
-                    entry.key,
-                    entry.source,
-                    entry.value,
-                    item.late,
-                    item.payload,
-                )
-            )
-    return out
-
-
 def _both(
     inputs: list[ReplayInput], window: int, dedupe: bool, memory: int, run: int
 ) -> tuple[object, object]:
     oracle = Oracle(inputs, window=window, dedupe=dedupe, memory=memory)
     try:
-        expected = (_plan(oracle), oracle.before_logstart, oracle.duplicates, oracle.late)
+        expected = (plan(oracle), oracle.before_logstart, oracle.duplicates, oracle.late)
     finally:
         oracle.close()
     schedule = Schedule(inputs, window=window, dedupe=dedupe, memory=memory, run=run)
     try:
-        got = (_plan(schedule), schedule.before_logstart, schedule.duplicates, schedule.late)
+        got = (plan(schedule), schedule.before_logstart, schedule.duplicates, schedule.late)
     finally:
         schedule.close()
     return got, expected
