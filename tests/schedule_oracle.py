@@ -194,9 +194,11 @@ def plan(items: Iterable[Any]) -> list[tuple[object, ...]]:
         if isinstance(item, Item):
             entry = item.entry
             fields = (item.time, item.origin, entry.key, entry.source, entry.value, item.late)
-            out.append((*fields, item.payload))
+            row = (*fields, item.payload)
         else:
             binary = isinstance(item[VALUE], BinaryRef)
             fields = tuple(item[i] for i in (TIME, ORIGIN, KEY, SOURCE, VALUE, LATE))
-            out.append((*fields, item[PAYLOAD] if binary else None))
+            row = (*fields, item[PAYLOAD] if binary else None)
+        # a NaN is never equal to itself: its text (with -0.0's sign) is compared instead
+        out.append(tuple(repr(v) if isinstance(v, float) else v for v in row))
     return out
