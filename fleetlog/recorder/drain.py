@@ -42,7 +42,10 @@ _CHECK_EVERY = 32
 #: the longest one subscriber's batch may hold the drain thread before the others get a
 #: turn: a flood of costly commands on one key must not hold back the variables on the rest
 _SLICE = 0.01
-#: empty passes (1 ms apart) before the drain thread sleeps until there is work: a steady
+#: the wait between two passes that found the FIFOs empty, while samples still come: the
+#: longest a sample waits in its FIFO then (and every pass costs a wake-up of this thread)
+_POLL = 0.001
+#: empty passes (_POLL apart) before the drain thread sleeps until there is work: a steady
 #: stream keeps it polling, which batches samples per pass (one write per batch), and a
 #: handover to a watcher thread costs a few thread switches
 _SPIN = 4
@@ -209,8 +212,12 @@ class Drain:
         self._drained_at = 0.0
         #: how many times the thread slept until there was work (tests, benchmarks)
         self.sleeps = 0
-        #: the running drain's fast lane (tests, benchmarks)
+        #: the general way's decoder (the lane shares its caches)
+        self._decoder = SampleDecoder(var_prefix)
+        #: the drain's fast lane, made at the first pass (tests, benchmarks)
         self.lane: Lane | None = None
+        #: whether the last :meth:`step` found every FIFO it read empty
+        self.drained = True
 
     def add(self, sub: Fifo) -> None:
         """Drain one more subscriber (from any point of the drain thread's work)."""
@@ -323,47 +330,70 @@ class Drain:
         with self.wake.signals():
             self._run()
 
+    def _lane(self) -> Lane:
+        """Return the drain thread's lane (made at its first use)."""
+        lane = self.lane
+        if lane is None:
+            lane = self.lane = Lane(self.recorder, self._decoder, self.misses.seen)
+        return lane
+
+    def step(self) -> int:
+        """Run one pass over the FIFOs; return how many samples it handed to the recorder.
+
+        Each FIFO is read until it is empty, its slice is over or 8192 samples were taken;
+        then, if every FIFO was found empty (:attr:`drained`), what was written is flushed
+        at once: a line is readable as soon as the recorder has caught up. While a FIFO
+        still holds samples, lines are flushed once they waited ``_FLUSH_DELAY``.
+        """
+        recorder = self.recorder
+        pump = self._lane().pump
+        monotonic = time.monotonic
+        got = 0
+        drained = True
+        for inbox in self.inboxes:
+            if inbox.lent:
+                continue  # empty when it was lent; its watcher wakes the thread for more
+            try_recv = inbox.sub.try_recv
+            batch = 0
+            began = monotonic()
+            sample = inbox.held
+            if sample is None:
+                sample = try_recv()
+            else:
+                inbox.held = None
+            while sample is not None:
+                # _CHECK_EVERY samples at a time (fewer: the FIFO is empty), then whether
+                # a flush is due and whether this subscriber had its slice.
+                done = pump(sample, try_recv, _CHECK_EVERY)
+                batch += done
+                if done < _CHECK_EVERY:
+                    break
+                if recorder.flush_due(_FLUSH_DELAY):
+                    recorder.flush()
+                if monotonic() - began > _SLICE or batch >= 8192:
+                    drained = False
+                    break
+                sample = try_recv()
+            got += batch
+        self.drained = drained
+        if recorder.flush_due(0.0 if drained else _FLUSH_DELAY):
+            recorder.flush()
+        return got
+
     def _run(self) -> None:
         recorder = self.recorder
-        decoder = SampleDecoder(self._prefix)
-        lane = self.lane = Lane(recorder, decoder, self.misses.seen)
-        pump = lane.pump
+        decoder = self._decoder
+        step = self.step
         monotonic = time.monotonic
+        sleep = time.sleep
         next_tick = 0.0
         idle = 0
         stop = self._stop
         commands = recorder.commands
         watchdog = self._watchdog
-        inboxes = self.inboxes
         while not stop.is_set():
-            got = 0
-            for inbox in inboxes:
-                if inbox.lent:
-                    continue
-                try_recv = inbox.sub.try_recv
-                batch = 0
-                began = monotonic()
-                sample = inbox.held
-                if sample is None:
-                    sample = try_recv()
-                else:
-                    inbox.held = None
-                while sample is not None:
-                    # _CHECK_EVERY samples at a time (fewer: the FIFO is empty), then whether
-                    # a flush is due and whether this subscriber had its slice.
-                    done = pump(sample, try_recv, _CHECK_EVERY)
-                    batch += done
-                    if done < _CHECK_EVERY:
-                        break
-                    if recorder.flush_due(_FLUSH_DELAY):
-                        recorder.flush()
-                    if monotonic() - began > _SLICE or batch >= 8192:
-                        break
-                    sample = try_recv()
-                got += batch
+            got = step()
             now = monotonic()
-            if recorder.flush_due(0.0 if not got else _FLUSH_DELAY):
-                recorder.flush()
             if commands.pending:
                 # One control command per pass, between batches (as a PLOGGER_CMD costs).
                 commands.run_queued()
@@ -382,7 +412,7 @@ class Drain:
             else:
                 idle += 1
                 if idle <= _SPIN:
-                    # A line still reaches the OS within the bound.
-                    time.sleep(0.001)
+                    # Samples that come meanwhile wait for the next pass at most this long.
+                    sleep(_POLL)
                 elif not stop.is_set():
                     self._sleep()

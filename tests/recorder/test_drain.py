@@ -19,9 +19,9 @@ from helpers import free_port
 from recorder_support import T0, config, rigs  # noqa: F401  (rigs: a fixture)
 
 from fleetlog.moos.mission import LoggerConfig
-from fleetlog.recorder.drain import Wake
+from fleetlog.recorder.drain import Drain, Wake
 from fleetlog.recorder.service import RecorderService, ServiceOptions
-from fleetlog.transport.bus import MoosPublisher
+from fleetlog.transport.bus import MoosPublisher, declare_fifo_subscriber
 from fleetlog.transport.queries import start_query
 from fleetlog.transport.session import SessionOptions, open_session
 from fleetlog.wire.control import CONTROL
@@ -110,6 +110,62 @@ def test_a_compressed_unit_still_open_is_due_in_a_quarter_second(
     rig.clock.t = T0 + 1.25
     rig.rec.tick()
     assert session.unit_due() is None
+
+
+def test_a_line_is_readable_once_the_fifos_are_found_empty(
+    rigs: Callable[..., Any],  # noqa: F811
+) -> None:
+    """A pass that empties every FIFO hands what it wrote to the OS, however young the lines.
+
+    The recorder's clock stands still, so no line ever waits the flush delay: only finding
+    the FIFOs empty can make them readable (before, a pass that had taken samples left its
+    lines for the next pass or the delay, and a reader waited up to 5 ms more).
+    """
+    rig = rigs("File = R\nPath = logs\nLog = X @ 0\nLog = Y @ 0\nWildcardLogging = false")
+    rig.rec.start()
+    alog = rig.dir / f"{rig.dir.name}.alog"
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    rx = open_session(SessionOptions(listen=(endpoint,), multicast_scouting=False))
+    tx = open_session(SessionOptions(connect=(endpoint,), multicast_scouting=False))
+    drain = Drain(rig.rec, f"{ROOT}/alpha/var/", threading.Event())
+    try:
+        for name in ("X", "Y"):  # a FIFO each: both must be found empty
+            drain.add(declare_fifo_subscriber(rx, var_key(ROOT, "alpha", name)))
+            probe = tx.declare_publisher(var_key(ROOT, "alpha", name))
+            deadline = time.monotonic() + 10
+            while not probe.matching_status.matching and time.monotonic() < deadline:
+                time.sleep(0.01)
+            probe.undeclare()
+        pub = MoosPublisher(tx, ROOT, "alpha", "iTest", clock=lambda: T0 + 0.5)
+        sent = [("XY"[i % 2], float(i)) for i in range(60)]
+        for name, value in sent:
+            pub.publish(name, value)
+        taken = drained_passes = 0
+        deadline = time.monotonic() + 20
+        while taken < len(sent) and time.monotonic() < deadline:
+            got = drain.step()
+            taken += got
+            if drain.drained:
+                drained_passes += got > 0
+                with alog.open(encoding="utf-8", newline="") as f:
+                    on_disk = [(e.key, float(e.value)) for e in iter_entries(f) if e.key in "XY"]  # type: ignore[arg-type]
+                # Everything taken so far, each variable in the order it was published.
+                assert len(on_disk) == taken
+                for name in "XY":
+                    mine = [v for n, v in on_disk if n == name]
+                    assert mine == [v for n, v in sent if n == name][: len(mine)]
+            if not got:
+                time.sleep(0.001)
+        assert taken == len(sent)
+        assert drained_passes
+        assert drain.lane is not None
+        # The common way (each variable's first sample goes the general way, which types it).
+        assert drain.lane.fast == len(sent) - 2
+        pub.close()
+    finally:
+        drain.close()
+        tx.close()
+        rx.close()
 
 
 @pytest.fixture
