@@ -394,7 +394,7 @@ def _wait_for(stream: IO[str], word: str) -> None:
 
 def role_publisher(args: argparse.Namespace) -> None:
     """Publish N doubles on a few keys with MoosPublisher (BLOCK), then the END marker."""
-    from fleetlog.transport.bus import MoosPublisher
+    from fleetlog.transport.publisher import MoosPublisher
     from fleetlog.transport.session import SessionOptions, open_session
     from fleetlog.wire.keys import var_key
 

@@ -56,7 +56,8 @@ MISSION = (
 
 
 def pub_main(argv: list[str]) -> int:
-    from fleetlog.transport.bus import MoosPublisher, wait_for_subscriber
+    from fleetlog.transport.bus import wait_for_subscriber
+    from fleetlog.transport.publisher import MoosPublisher
     from fleetlog.transport.session import SessionOptions, open_session
     from fleetlog.wire.keys import var_key
 

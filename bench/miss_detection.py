@@ -133,7 +133,7 @@ def role_pub(args: argparse.Namespace) -> None:
     import zenoh
     from zenoh import ext
 
-    from fleetlog.transport.bus import MoosPublisher
+    from fleetlog.transport.publisher import MoosPublisher
     from fleetlog.wire.keys import var_key
     from fleetlog.wire.message import ENCODINGS, Kind, encode_attachment
 

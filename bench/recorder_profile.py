@@ -52,7 +52,8 @@ from fleetlog.moos.mission import LoggerConfig
 from fleetlog.recorder.engine import Recorder
 from fleetlog.recorder.lane import Lane
 from fleetlog.recorder.service import RecorderService, ServiceOptions
-from fleetlog.transport.bus import MoosPublisher, SampleDecoder
+from fleetlog.transport.bus import SampleDecoder
+from fleetlog.transport.publisher import MoosPublisher
 from fleetlog.transport.session import SessionOptions, open_session
 from fleetlog.wire.keys import var_key
 from fleetlog.wire.message import attachment_fields

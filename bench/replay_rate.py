@@ -42,7 +42,7 @@ from fleetlog.replayer.inputs import open_input
 from fleetlog.replayer.options import PlayOptions
 from fleetlog.replayer.schedule import Schedule
 from fleetlog.storage.readers import AlogReader
-from fleetlog.transport.bus import MoosPublisher
+from fleetlog.transport.publisher import MoosPublisher
 from fleetlog.transport.replay import ReplayLink
 from fleetlog.transport.session import SessionOptions, open_session
 
@@ -135,7 +135,11 @@ def measure_replay(path: Path, n: int, cpus: list[float]) -> float:
             link = ReplayLink(session, ROOT, [VEHICLE])
             wait_subscribed(link)
             player = Player(
-                [source], link.publish, RealClock(), PlayOptions(rate=None, db_time=False)
+                [source],
+                link.publish,
+                RealClock(),
+                PlayOptions(rate=None, db_time=False),
+                senders=link.sender,
             )
             start, cpu = time.time(), time.thread_time()
             summary = player.run()
@@ -171,7 +175,7 @@ def measure_timing(path: Path, n: int, clock: RealClock, display: bool) -> tuple
             link = ReplayLink(session, ROOT, [VEHICLE])
             wait_subscribed(link)
             options = PlayOptions(rate=1.0, db_time=False)
-            player = Player([source], link.publish, clock, options, link.prepare)
+            player = Player([source], link.publish, clock, options, link.prepare, link.sender)
             if display:
                 console = Console(file=io.StringIO(), force_terminal=True, width=120)
                 with ProgressLine(player.status, console, keys=True) as line:

@@ -51,6 +51,11 @@ def rss_kb(pid: int) -> int:
     return 0
 
 
+#: the first failures of each shore loop: (seconds into the soak, exit code, last stderr line)
+FAILURES: dict[str, list[tuple[float, int, str]]] = {}
+STARTED = time.monotonic()
+
+
 def cli(*args: str, endpoint: str, cwd: Path, timeout: float = 120.0) -> int:
     done = subprocess.run(
         [sys.executable, "-m", "fleetlog", *args, "-e", endpoint, "--no-multicast-scouting"],
@@ -59,6 +64,11 @@ def cli(*args: str, endpoint: str, cwd: Path, timeout: float = 120.0) -> int:
         timeout=timeout,
         check=False,
     )
+    if done.returncode:
+        seen = FAILURES.setdefault(args[0], [])
+        if len(seen) < 10:
+            lines = done.stderr.decode("utf-8", "replace").strip().splitlines() or ["(nothing)"]
+            seen.append((round(time.monotonic() - STARTED, 1), done.returncode, lines[-1][:300]))
     return done.returncode
 
 
@@ -282,6 +292,7 @@ def main() -> int:
             "fetch_failed": loops[0].failures,
             "grep_runs": loops[1].runs,
             "grep_failed": loops[1].failures,
+            "first_failures": FAILURES,
             "garbage": garbage,
             "final_status": {k: final.get(k) for k in STATUS_KEYS},
         }

@@ -21,7 +21,8 @@ from __future__ import annotations
 from types import TracebackType
 
 from fleetlog.errors import QueryError
-from fleetlog.transport.bus import MoosPublisher, wait_for_subscriber
+from fleetlog.transport.bus import wait_for_subscriber
+from fleetlog.transport.publisher import MoosPublisher
 from fleetlog.transport.queries import ZenohSession
 from fleetlog.transport.services import get_replies, live_vehicles
 from fleetlog.transport.session import SessionOptions, open_session

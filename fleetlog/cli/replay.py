@@ -30,6 +30,7 @@ from fleetlog.errors import UsageError
 from fleetlog.replayer.control import MAX_RATE, MIN_RATE
 from fleetlog.replayer.engine import Player
 from fleetlog.replayer.filters import FilterSpec
+from fleetlog.replayer.inputs import clock_warnings
 from fleetlog.replayer.options import PlayOptions
 from fleetlog.replayer.report import State
 from fleetlog.replayer.schedule import DEFAULT_WINDOW
@@ -337,6 +338,8 @@ def _run(
         f"fleetlog: replaying {len(service.inputs)} input(s) as {vehicles}; control: {control}",
         markup=False,
     )
+    for warning in clock_warnings(service.inputs):
+        console.print(f"fleetlog: warning: {warning}", markup=False)
 
     stopping: list[int] = []
 

@@ -15,7 +15,8 @@ import sys
 import time
 from collections import Counter
 
-from fleetlog.transport.bus import MoosPublisher, declare_fifo_subscriber, wait_for_subscriber
+from fleetlog.transport.bus import declare_fifo_subscriber, wait_for_subscriber
+from fleetlog.transport.publisher import MoosPublisher
 from fleetlog.transport.session import SessionOptions, open_session
 from fleetlog.wire.keys import parse_var_key, var_key
 

@@ -9,12 +9,14 @@ and a limit.
 Entries are read with the columnar reader (:class:`~fleetlog.storage.columnar.AlogReader`,
 ``errors="skip"``: a field log with a garbled line still answers, and the end record counts
 what was skipped), in file order, as the low-level reader keeps them. The filter runs before
-values are typed: globs are matched once per distinct variable and source (a few hundred in a
-log of millions of lines) with the linear-time matcher, and rows are kept by set membership
-in Rust, and the matches are written as JSON lines by one string kernel a block
-(:func:`_record_lines`), not one Python object per record. The recorder's process serves
-greps, so blocks are small (:data:`GREP_BLOCK`): no step holds the GIL for long and
-recording never waits on a grep.
+values are typed, and most lines are never cut into fields: a line a glob keeps holds the
+glob's literal (``NAV_X``), so in a block without continuation lines only the lines holding
+one are (:mod:`fleetlog.storage.alogheads`). Globs are matched once per distinct variable and
+source (a few hundred in a log of millions of lines) with the linear-time matcher, rows are
+kept by set membership in Rust, and the matches are written as JSON lines by one string
+kernel a block (:func:`_record_lines`), not one Python object per record. The recorder's
+process serves greps, so blocks are small (:data:`GREP_BLOCK`): no step holds the GIL for
+long and recording never waits on a grep.
 """
 
 from __future__ import annotations

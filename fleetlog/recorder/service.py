@@ -28,11 +28,8 @@ from fleetlog.recorder.background import BackgroundWriter
 from fleetlog.recorder.drain import Drain, Wake
 from fleetlog.recorder.engine import Recorder
 from fleetlog.storage.catalog import disk_space
-from fleetlog.transport.bus import (
-    MoosPublisher,
-    declare_fifo_subscriber,
-    heartbeat_keys,
-)
+from fleetlog.transport.bus import declare_fifo_subscriber, heartbeat_keys
+from fleetlog.transport.publisher import MoosPublisher
 from fleetlog.transport.queries import (
     IncomingQuery,
     LivelinessToken,

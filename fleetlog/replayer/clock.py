@@ -60,13 +60,10 @@ class RealClock:
         self._event = threading.Event()
         self._margin = spin_margin
 
-    def now(self) -> float:
-        """Return ``time.monotonic()``."""
-        return time.monotonic()
-
-    def wall(self) -> float:
-        """Return ``time.time()``."""
-        return time.time()
+    #: ``time.monotonic()``, for pacing; ``time.time()``, for stamps (the C functions
+    #: themselves: a replay as fast as possible asks once per entry)
+    now = staticmethod(time.monotonic)
+    wall = staticmethod(time.time)
 
     def wake(self) -> None:
         """Wake the waiting thread (from any thread)."""

@@ -34,6 +34,7 @@ import queue
 import threading
 from collections.abc import Callable, Sequence
 from concurrent.futures import Future
+from itertools import chain
 
 from fleetlog.errors import ReplayError, StorageError
 from fleetlog.moos.alog import BinaryRef
@@ -52,10 +53,11 @@ from fleetlog.replayer.control import (
 )
 from fleetlog.replayer.filters import EntryFilter
 from fleetlog.replayer.inputs import ReplayInput
+from fleetlog.replayer.items import KEY, LATE, ORIGIN, SOURCE, TIME, VALUE, Item
 from fleetlog.replayer.options import PlayOptions
-from fleetlog.replayer.output import Output, Prepare, Publish
+from fleetlog.replayer.output import Output, Prepare, Publish, Senders
 from fleetlog.replayer.report import Lateness, State, Status, Summary, VehicleCounts
-from fleetlog.replayer.schedule import Item, Schedule
+from fleetlog.replayer.schedule import Schedule
 from fleetlog.wire.message import Kind
 
 __all__ = ["Player"]
@@ -79,6 +81,8 @@ class Player:
         options: how to play.
         prepare: called once per vehicle, variable and type before its first publication,
             while the player has time to spare (at the start, or waiting for an entry).
+        senders: makes the senders that publish the entries (a replay link's); without,
+            entries go to ``publish`` as messages.
     """
 
     def __init__(
@@ -88,6 +92,7 @@ class Player:
         clock: Clock,
         options: PlayOptions | None = None,
         prepare: Prepare | None = None,
+        senders: Senders | None = None,
     ) -> None:
         if not inputs:
             msg = "nothing to replay"
@@ -95,7 +100,7 @@ class Player:
         self.options = options or PlayOptions()
         self.options.check()
         self.inputs = inputs
-        self._out = Output(publish, prepare)
+        self._out = Output(publish, prepare, senders)
         #: Work for the player's own thread when it has time to spare (redraw a progress
         #: line, publish the status): done here, not in another thread, because another
         #: thread holding the GIL for a millisecond delays the next entry by as much.
@@ -183,9 +188,9 @@ class Player:
     def _position_locked(self) -> float:
         if self._state is State.PLAYING and self._rate is not None:
             position = self._anchor_log + (self._clock.now() - self._anchor_now) * self._rate
-            if self._next is not None and not self._next.late:
+            if self._next is not None and not self._next[LATE]:
                 # Not past the entry it waits for: a choke or a slow publish holds it there.
-                position = min(position, max(self._next.time, self._last))
+                position = min(position, max(self._next[TIME], self._last))
             return min(position, self._stop_time)
         if self._state is State.PLAYING:
             return self._last
@@ -216,13 +221,13 @@ class Player:
         self._pass_items = 0  # what the pass plays, not what it skipped
 
     def _skip_to(self, at: float) -> None:
-        while self._next is not None and self._next.time < at:
+        while self._next is not None and self._next[TIME] < at:
             self._advance()
 
     def _advance(self) -> None:
         assert self._schedule is not None
-        if self._next is not None and self._next.time > self._consumed:
-            self._consumed = self._next.time
+        if self._next is not None and self._next[TIME] > self._consumed:
+            self._consumed = self._next[TIME]
         self._next = next(self._schedule, None)
         self._pass_items += 1
 
@@ -249,7 +254,7 @@ class Player:
         try:
             self._open(self._begin)
             if self.options.start is None and self._next is not None:
-                self._begin = self._next.time
+                self._begin = self._next[TIME]
             if self.options.db_time:
                 for vehicle in dict.fromkeys(self.vehicles):
                     self._out.prepare_once(vehicle, "PLAYBACK_DB_TIME", Kind.DOUBLE)
@@ -274,7 +279,16 @@ class Player:
                 self._idle(clock.now(), None)
                 continue
             item = self._next
-            if item is None or item.time > self._stop_time:
+            if (
+                self._rate is None
+                and state is State.PLAYING
+                and self._heartbeat is None
+                and item is not None
+                and item[TIME] <= self._stop_time
+            ):
+                self._play_fast()
+                continue
+            if item is None or item[TIME] > self._stop_time:
                 if self._wrap():
                     continue
                 with self._lock:
@@ -283,8 +297,8 @@ class Player:
                         self._end = self._frozen
                     self._state = State.FINISHED
                 return
-            if not self._filter.allows(item.entry.key, item.entry.source):
-                self._counts[self.vehicles[item.origin]].filtered += 1
+            if not self._filter.allows(item[KEY], item[SOURCE]):
+                self._counts[self.vehicles[item[ORIGIN]]].filtered += 1
                 self._advance()
                 continue
             if self._choked():
@@ -293,8 +307,8 @@ class Player:
                 self._idle(clock.now(), None)
                 continue
             due = None
-            if self._rate is not None and not item.late:
-                due = self._due(item.time)
+            if self._rate is not None and not item[LATE]:
+                due = self._due(item[TIME])
                 now = clock.now()
                 if now < due:
                     if self._out.prepares:
@@ -373,18 +387,21 @@ class Player:
 
     def _emit(self, item: Item, due: float | None) -> None:
         """Publish one entry (after PLAYBACK_DB_TIME if it opens a tick) and move on."""
+        self._publish(item, due)
+        self._advance()
+
+    def _publish(self, item: Item, due: float | None) -> None:
+        """Publish one entry (after PLAYBACK_DB_TIME if it opens a tick), or count it."""
         assert self._schedule is not None
-        vehicle = self.vehicles[item.origin]
-        entry = item.entry
+        vehicle = self.vehicles[item[ORIGIN]]
         value: float | str | bytes
         try:
-            raw = entry.value
+            raw = item[VALUE]
             value = self._schedule.payload(item) if isinstance(raw, BinaryRef) else raw
         except StorageError as err:
             self._counts[vehicle].unplayable += 1
             if len(self._errors) < _MAX_ERRORS:
                 self._errors.append(str(err))
-            self._advance()
             return
         clock = self._clock
         wall = clock.wall()
@@ -394,18 +411,77 @@ class Player:
         if due is not None:
             self._timing.add(clock.now() - due)
         self._counts[vehicle].published += 1
-        if item.time > self._last:
-            self._last = item.time
-        self._advance()
+        if item[TIME] > self._last:
+            self._last = item[TIME]
+
+    def _play_fast(self) -> None:
+        """Publish entries back to back: playing as fast as possible, with no choke client.
+
+        What the general loop does for each such entry, without its per-entry calls. It
+        returns at a command, a heartbeat, the stop time or the end, for the general loop.
+        """
+        schedule = self._schedule
+        assert schedule is not None
+        commands = self._commands
+        clock = self._clock
+        wall = clock.wall
+        publish = self._out.entry
+        allows = self._filter.allows if self._filter.active else None
+        vehicles = self.vehicles
+        counts = [self._counts[v] for v in vehicles]
+        published = [0] * len(vehicles)  # added to counts every 64 entries, and at the end
+        stop_time = self._stop_time
+        db_time = self.options.db_time
+        hooks = self.idle_hooks
+        last, consumed, played = self._last, self._consumed, 0
+        head = self._next
+        item = head
+        try:
+            while head is not None:
+                run = schedule.take()
+                for index, item in enumerate(chain((head,), run)):
+                    t = item[TIME]
+                    if t > stop_time or not commands.empty() or self._heartbeat is not None:
+                        schedule.give_back(run[index:])
+                        return
+                    if t > consumed:
+                        consumed = t
+                    played += 1
+                    if not played & 63:
+                        _add_published(counts, published)
+                        if hooks:
+                            self._idle(clock.now(), None)
+                    if allows is not None and not allows(item[KEY], item[SOURCE]):
+                        counts[item[ORIGIN]].filtered += 1
+                        continue
+                    value = item[VALUE]
+                    if isinstance(value, BinaryRef):
+                        self._publish(item, None)  # the bytes are read, or the error counted
+                        last = self._last
+                        continue
+                    at = wall()
+                    origin = item[ORIGIN]
+                    if db_time:
+                        self._db_time(vehicles[origin], item, at)
+                    publish(vehicles[origin], item, value, at)
+                    published[origin] += 1
+                    if t > last:
+                        last = self._last = t
+                head = item = next(schedule, None)
+        finally:
+            _add_published(counts, published)
+            self._next = item
+            self._consumed = consumed
+            self._pass_items += played
 
     def _db_time(self, vehicle: str, item: Item, wall: float) -> None:
         tick_end = self._out.opens_tick(vehicle, self._clock.now())
         if tick_end is None:
             return
-        value = item.time
+        value = item[TIME]
         if self._rate is not None and self._state is State.PLAYING:
             value = max(value, self._anchor_log + (tick_end - self._anchor_now) * self._rate)
-        value = min(value, max(self._stop_time, item.time))
+        value = min(value, max(self._stop_time, item[TIME]))
         self._out.db_time(vehicle, value, wall)
 
     # -- commands
@@ -504,12 +580,12 @@ class Player:
             position = self._frozen
         if command.seconds is not None:
             target = min(position + command.seconds, self._stop_time)
-            while (item := self._next) is not None and item.time <= target:
+            while (item := self._next) is not None and item[TIME] <= target:
                 self._step_one(item)
             position = max(target, self._last)
         else:
             left = command.entries
-            while left and (item := self._next) is not None and item.time <= self._stop_time:
+            while left and (item := self._next) is not None and item[TIME] <= self._stop_time:
                 left -= self._step_one(item)
             position = max(position, self._last)
         with self._lock:
@@ -518,13 +594,13 @@ class Player:
 
     def _step_one(self, item: Item) -> int:
         """Publish (or filter out) one entry while stepping; return 1 if it was published."""
-        if not self._filter.allows(item.entry.key, item.entry.source):
-            self._counts[self.vehicles[item.origin]].filtered += 1
+        if not self._filter.allows(item[KEY], item[SOURCE]):
+            self._counts[self.vehicles[item[ORIGIN]]].filtered += 1
             self._advance()
             return 0
-        before = self._counts[self.vehicles[item.origin]].published
+        before = self._counts[self.vehicles[item[ORIGIN]]].published
         self._emit(item, None)
-        return self._counts[self.vehicles[item.origin]].published - before
+        return self._counts[self.vehicles[item[ORIGIN]]].published - before
 
     # -- the end
 
@@ -552,3 +628,11 @@ class Player:
                 for i, item in enumerate(self.inputs)
             ],
         )
+
+
+def _add_published(counts: list[VehicleCounts], published: list[int]) -> None:
+    """Add the entries published since the last call to each input's counts; reset them."""
+    for origin, count in enumerate(published):
+        if count:
+            counts[origin].published += count
+            published[origin] = 0

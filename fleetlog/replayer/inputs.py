@@ -28,12 +28,14 @@ from fleetlog.errors import FormatError, ReplayError, StorageError
 from fleetlog.moos.alog import BANNER_RULE
 from fleetlog.moos.mission import parse_mission
 from fleetlog.storage.columnar import read_tail
+from fleetlog.storage.metafile import read_meta
 from fleetlog.storage.readers import AlogReader, Errors, find_alog, open_text
 
 __all__ = [
     "RemoteSpec",
     "ReplayInput",
     "alog_root",
+    "clock_warnings",
     "detect_vehicle",
     "open_input",
     "open_inputs",
@@ -96,6 +98,9 @@ class ReplayInput:
         logstart: the banner's LOGSTART (absolute time of offset 0).
         end: the absolute time of the last entry, when it can be known cheaply (a plain
             alog); None for compressed alogs.
+        synced: whether the recording host's clock was synchronised when the session
+            opened, from fleetlog's session metadata beside the alog (None: not known, as
+            for a log written by pLogger).
     """
 
     name: str
@@ -104,6 +109,7 @@ class ReplayInput:
     vehicle_from: str
     logstart: float
     end: float | None
+    synced: bool | None = None
 
     @property
     def path(self) -> Path:
@@ -192,6 +198,37 @@ def _tail_end(reader: AlogReader) -> float | None:
     return logstart + float(offsets.max()) if offsets.len() else None  # type: ignore[arg-type]
 
 
+def clock_warnings(inputs: Sequence[ReplayInput]) -> list[str]:
+    """What to warn of before a fleet replay: vehicles whose clock was not synchronised.
+
+    Several vehicles play on one clock by their absolute times; one whose clock was not
+    synchronised when its session opened (fleetlog's session metadata says so) may be
+    placed seconds away from the others. One vehicle alone plays right whatever its clock.
+    """
+    if len({item.vehicle for item in inputs}) < 2:
+        return []
+    return [
+        f"{item.vehicle}'s clock was not synchronised when {item.name} was recorded: on one"
+        " clock with the other vehicles, its entries may be out of place by as much as its"
+        " clock was off"
+        for item in inputs
+        if item.synced is False
+    ]
+
+
+def _clock_synced(reader: AlogReader) -> bool | None:
+    """Whether the session's clock was synchronised at open, from its metadata (if any).
+
+    A metadata file that cannot be read says nothing: the replay does not need it.
+    """
+    try:
+        meta = read_meta(reader.path.parent)
+    except (StorageError, FormatError):
+        return None
+    synced = meta.clock.get("synchronized") if meta is not None else None
+    return synced if isinstance(synced, bool) else None
+
+
 def _alog_of(spec: str) -> Path:
     path = Path(spec)
     if path.is_dir():
@@ -234,7 +271,8 @@ def open_input(
     reader = AlogReader(_alog_of(path), errors=errors, block_size=block_size)
     try:
         logstart, found = _identify(reader, name, vehicle, how)
-        return ReplayInput(name, reader, found[0], found[1], logstart, _tail_end(reader))
+        end = _tail_end(reader)
+        return ReplayInput(name, reader, found[0], found[1], logstart, end, _clock_synced(reader))
     except BaseException:
         reader.close()
         raise

@@ -20,6 +20,7 @@ from fleetlog.replayer.control import describe, parse_request
 from fleetlog.replayer.engine import Player
 from fleetlog.replayer.inputs import RemoteSpec, ReplayInput, open_inputs
 from fleetlog.replayer.options import PlayOptions
+from fleetlog.replayer.output import Sender
 from fleetlog.replayer.remote import default_cache, fetch_remote
 from fleetlog.replayer.report import Summary
 from fleetlog.shore.discovery import QUIET, Discovery
@@ -137,7 +138,12 @@ class ReplayService:
         inputs = self.open_inputs()
         try:
             self.player = Player(
-                inputs, self._publish, self.clock, options or self.config.options, self._prepare
+                inputs,
+                self._publish,
+                self.clock,
+                options or self.config.options,
+                self._prepare,
+                self._sender,
             )
         except BaseException:
             self.close_inputs()
@@ -147,6 +153,12 @@ class ReplayService:
     def _publish(self, vehicle: str, message: MoosMessage) -> None:
         assert self._link is not None
         self._link.publish(vehicle, message)
+
+    def _sender(
+        self, vehicle: str, name: str, kind: Kind, source: str, aux: str, community: str
+    ) -> Sender:
+        assert self._link is not None
+        return self._link.sender(vehicle, name, kind, source, aux, community)
 
     def _prepare(self, vehicle: str, name: str, kind: Kind) -> None:
         assert self._link is not None

@@ -1,7 +1,7 @@
 """One block of alog text becomes entries: continuation lines, stray lines, cut tails.
 
-:func:`parse_block` splits a block into lines, finds each line's fields
-(:mod:`fleetlog.storage.alogfields`), joins continuation lines to the entry before them
+:func:`parse_block` splits a block into lines and finds the entry lines' fields
+(:mod:`fleetlog.storage.alogheads`), joins continuation lines to the entry before them
 (before any entry, or after a comment, they are stray lines), follows the DATATYPE MARKING
 state, applies the cut-tail rules to a file's last entry (MOOS_FORMAT.md §12), runs the
 caller's ``where`` and types what it keeps (:mod:`fleetlog.storage.alogtypes`). The state a
@@ -10,14 +10,13 @@ pass carries from block to block is a :class:`PassState`.
 
 from __future__ import annotations
 
-import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
 from fleetlog.moos.alog import DATATYPE_MARKING
-from fleetlog.storage.alogfields import overflow_fields, standard_layout
+from fleetlog.storage.alogheads import find_heads
 from fleetlog.storage.alogtypes import exact_raw, typed
 
 if TYPE_CHECKING:
@@ -39,6 +38,7 @@ class PassState:
     where: Callable[[pl.DataFrame], pl.Series] | None = None
     orphans: int = 0  # stray lines seen so far
     reported: int = 0  # stray lines already reported (raise) or counted (skip)
+    literals: tuple[str, ...] | None = None  # every line ``where`` keeps holds one of them
 
 
 @dataclass
@@ -51,27 +51,7 @@ class Parsed:
     orphans: list[int]  # line numbers of stray lines
     exact: bool  # the block was valid UTF-8
     scanned: int = 0  # entries read (before ``where``)
-
-
-@functools.cache
-def _standard_fields(pl: ModuleType) -> tuple[Any, ...]:
-    """Every line's fields as if it had the standard layout, and whether it has (built once)."""
-    line = pl.col("l")
-    return (
-        pl.col("idx"),
-        line,
-        standard_layout(pl).alias("std"),
-        line.str.slice(0, 16)
-        .str.strip_chars_end(" ")
-        .cast(pl.Float64, strict=False)
-        .alias("offset"),
-        line.str.slice(16, 21).str.strip_chars_end(" ").alias("var"),
-        line.str.slice(37, 16).str.strip_chars_end(" ").alias("source"),
-        line.str.slice(53).alias("v"),
-        pl.lit(16, pl.Int32).alias("kpos"),
-        pl.lit(37, pl.Int32).alias("spos"),
-        pl.lit(53, pl.Int32).alias("vpos"),
-    )
+    lines: int = 0  # lines in the block
 
 
 def parse_block(
@@ -96,51 +76,20 @@ def parse_block(
     """
     col = pl.col
     line = col("l")
-    # The lines, and every line as if it had the standard layout and whether it has: one
-    # query, its expressions evaluated in parallel.
-    parsed = (
-        pl.LazyFrame({"l": [text]})
-        .select(line.str.split("\n").explode())
-        .with_row_index("idx")
-        .select(*_standard_fields(pl))
-        .collect()
-    )
-    lines = parsed.select("idx", "l")
-    n = parsed.height
-    std_mask = parsed["std"]
-    rest = lines.filter(~std_mask)
-    general_idx = None
-    entry_mask = std_mask
-    if rest.height:
-        candidates = rest.filter(line.str.contains(r"^-?[0-9]"))
-        if candidates.height:
-            general = overflow_fields(pl, candidates)
-            if general.height:
-                # the overflowing lines' fields replace the standard layout's, in place
-                general_idx = general["idx"]
-                parsed = parsed.with_columns(
-                    parsed[name].scatter(general_idx, general[name])
-                    for name in ("offset", "var", "source", "v", "kpos", "spos", "vpos")
-                )
-                entry_mask = std_mask.clone().scatter(general_idx, True)
-        comments = rest.filter(line.str.starts_with("%"))
-    else:
-        comments = rest
-    heads = parsed.filter(entry_mask).drop("std")
+    found = find_heads(pl, text, state.literals)
+    lines, heads, comments = found.lines, found.heads, found.comments
+    n = lines.height
     comment_idx = comments["idx"]
-    n_heads = heads.height + comments.height
+    entries = found.entries
 
     # Continuation lines join the entry before them; before any entry, or after a comment,
     # they are stray lines.
     orphans: list[int] = []
-    cont = pl.lit(None, pl.String)
-    if n_heads < n:
-        is_head = std_mask.clone()
-        is_head = is_head.scatter(comment_idx, True) if comments.height else is_head
-        is_head = is_head.scatter(general_idx, True) if general_idx is not None else is_head
-        is_entry = entry_mask
+    continued = False
+    if found.is_head is not None and found.is_entry is not None:
+        is_head = found.is_head
         tagged = lines.with_columns(
-            gid=is_head.cast(pl.Int32).cum_sum(), head=is_head, entry=is_entry
+            gid=is_head.cast(pl.Int32).cum_sum(), head=is_head, entry=found.is_entry
         )
         owner = tagged.filter(col("head")).select("gid", "entry")
         conts = tagged.filter(~col("head")).drop("entry").join(owner, on="gid", how="left")
@@ -156,9 +105,9 @@ def parse_block(
             head_idx = tagged.filter(col("head"))["idx"]
             joined = joined.with_columns(idx=head_idx.gather(joined["gid"] - 1)).drop("gid")
             heads = heads.join(joined, on="idx", how="left", maintain_order="left")
-            cont = col("c")
-    if "c" not in heads.columns:
-        heads = heads.with_columns(c=cont)
+            continued = True
+    if not continued:
+        heads = heads.with_columns(c=pl.lit(None, pl.String))
 
     # The DATATYPE MARKING state where each entry was finished (at the next head, or at the
     # end of the file): the line parser classified an entry then.
@@ -169,7 +118,8 @@ def parse_block(
         end_mark = True
         first = int(mark_lines[0])
         # entries after the marking line, and the one it finished (no comment in between)
-        before = heads["idx"].filter(heads["idx"] < first)
+        entry_idx = found.entry_idx()
+        before = entry_idx.filter(entry_idx < first)
         finisher = -1
         if before.len():
             last = int(before[-1])
@@ -188,6 +138,7 @@ def parse_block(
     if last_is_entry and not final and not at_head:
         consumed = last_head
         heads = heads.slice(0, heads.height - 1)
+        entries -= 1
     elif last_is_entry and final:
         # the last entry: whole only if the file was, and if it ends with its terminator
         value = heads["v"][-1]
@@ -198,12 +149,13 @@ def parse_block(
         )
         if not complete or not terminated:
             heads = heads.slice(0, heads.height - 1)
+            entries -= 1
             dropped = True
         elif mark_at_end and not end_mark:
             mark = pl.when(col("idx") == last_head).then(True).otherwise(pl.lit(mark))
     if dropped:
         on_drop()
-    scanned = heads.height
+    scanned = entries
     if state.where is not None and heads.height:
         keep = state.where(
             heads.select(
@@ -221,9 +173,10 @@ def parse_block(
         state.lineno,
         logstart,
         want,
-        cont is not None,
-        _BINARY_OPEN in text,
+        continued,
+        # a binary reference is a whole one-line value: only values that start with the tag
+        heads.height > 0 and bool(heads["v"].str.starts_with(_BINARY_OPEN).any()),
     )
     if block is not None:
         frame = exact_raw(pl, frame, block, state.lineno)
-    return Parsed(frame, consumed, end_mark, orphans, block is None, scanned)
+    return Parsed(frame, consumed, end_mark, orphans, block is None, scanned, n)

@@ -14,18 +14,25 @@ import functools
 from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
+from fleetlog.storage.columns import in_memory
+
 if TYPE_CHECKING:
     import polars as pl
 
-__all__ = ["entry_start", "line_start", "overflow_fields", "standard_layout", "starts_entry"]
+__all__ = [
+    "entry_line",
+    "entry_start",
+    "line_start",
+    "overflow_fields",
+    "standard_layout",
+    "starts_entry",
+]
 
 #: Lines looked at, from the end of a block, for an entry to cut the block before.
 _CUT_LOOKBACK = 64
 
-# The standard layout: no field wider than its column, so the value starts at character 53.
-_STD_TIME = r"^-?[0-9]+(?:\.[0-9]*)?(?:[eE][-+]?[0-9]+)? +$"
-_STD_KEY = r"^[^ ]+ +$"
-_STD_SOURCE = r"^[^ ]* +$"
+#: The line's first field (up to its first space) is a time.
+_TIME_FIELD = r"^-?[0-9]+(?:\.[0-9]*)?(?:[eE][-+]?[0-9]+)? "
 _TIME = r"^-?[0-9]+(?:\.[0-9]*)?(?:[eE][-+]?[0-9]+)?$"
 
 
@@ -88,17 +95,53 @@ def _all_spaces(pl: ModuleType, expr: Any, width: Any) -> Any:
     )
 
 
+def _field_rule(chars: str, width: int, shortest: int, wider: bool = True) -> str:
+    """A regex: a field of ``chars`` left-justified to ``width`` (or wider), one space after."""
+    longest = width if wider else width + 1
+    padded = "|".join(f"{chars}{{{n}}} {{{width + 1 - n}}}" for n in range(shortest, longest))
+    return f"(?:{padded}|{chars}{{{width},}} )" if wider else f"(?:{padded})"
+
+
+#: The standard layout as one regex on a whole line: a time left-justified to 15, a variable
+#: (at least one character) to 20, a source (maybe none) to 15, each followed by one space,
+#: so the value starts at character 53. With _TIME_FIELD (the time is a time), without
+#: cutting the line: its first 16 characters are a time and spaces, the next 21 a variable
+#: and spaces, the next 16 a source (maybe none) and spaces.
+_STD_LINE = (
+    "^"
+    + _field_rule("[-+.0-9eE]", 15, 1, wider=False)
+    + _field_rule("[^ ]", 20, 1, wider=False)
+    + _field_rule("[^ ]", 15, 0, wider=False)
+)
+
+
 @functools.cache
 def standard_layout(pl: ModuleType) -> Any:
     """An expression: the line ``l`` is an entry with no field wider than its column."""
     line = pl.col("l")
-    source_field = line.str.slice(37, 16)
-    return (
-        source_field.str.len_chars().eq(16)
-        & line.str.slice(0, 16).str.contains(_STD_TIME)
-        & line.str.slice(16, 21).str.contains(_STD_KEY)
-        & source_field.str.contains(_STD_SOURCE)
-    )
+    return line.str.contains(_TIME_FIELD) & line.str.contains(_STD_LINE)
+
+
+#: The writer's column rule as one regex on a whole line, for lines whose fields may be
+#: wider than their columns: a time left-justified to 15 or wider, a variable (at least
+#: one character) to 20, a source (maybe none) to 15, each followed by one space. Each
+#: field is cut at its first space (no field holds one), so a line matches exactly when
+#: :func:`overflow_fields` finds its fields, given that its time is a time (_TIME_FIELD).
+_ENTRY_LINE = (
+    "^" + _field_rule("[-+.0-9eE]", 15, 1) + _field_rule("[^ ]", 20, 1) + _field_rule("[^ ]", 15, 0)
+)
+
+
+@functools.cache
+def entry_line(pl: ModuleType) -> Any:
+    """An expression: the line ``l`` is an entry, whatever its fields' widths.
+
+    True exactly where :func:`standard_layout` is or :func:`overflow_fields` finds fields,
+    in two regex tests of the whole line (no field cut out): for reads that need to know
+    which lines are entries but not the fields of most of them.
+    """
+    line = pl.col("l")
+    return line.str.contains(_TIME_FIELD) & line.str.contains(_ENTRY_LINE)
 
 
 def overflow_fields(pl: ModuleType, lines: pl.DataFrame) -> pl.DataFrame:
@@ -111,7 +154,7 @@ def overflow_fields(pl: ModuleType, lines: pl.DataFrame) -> pl.DataFrame:
     frame = lines.lazy()
     for method, args, kwargs in _overflow_plan(pl):
         frame = getattr(frame, method)(*args, **kwargs)
-    return frame.collect()
+    return frame.collect(engine=in_memory(pl))
 
 
 @functools.cache

@@ -12,7 +12,7 @@ from types import ModuleType
 from typing import TYPE_CHECKING, Any
 
 from fleetlog.moos.alog import split_source
-from fleetlog.storage.columns import TYPES
+from fleetlog.storage.columns import TYPES, in_memory
 
 if TYPE_CHECKING:
     import polars as pl
@@ -38,7 +38,7 @@ def typed(
     ``mark`` is a bool when the whole block has one DATATYPE MARKING state (nearly always:
     the expressions are then simpler), else an expression; ``continued`` says whether any
     entry has continuation lines; ``binary`` whether any value may be a binary reference
-    (the block holds ``<MOOS_BINARY>``: without it, the tag's regex is not run on every value).
+    (a value starts with ``<MOOS_BINARY>``: without one, the tag's regex is not run at all).
     """
     names = [name for name in _OUTPUTS if name in want]
     extra = [name for name in ("kpos", "spos", "vpos") if name in heads.columns]
@@ -58,7 +58,7 @@ def typed(
         ).alias("time"),
     }
     exprs = [per_block[name] if name in per_block else outputs[name] for name in names]
-    result = frame.select(*exprs, *extra).collect()
+    result = frame.select(*exprs, *extra).collect(engine=in_memory(pl))
     if "src" in want or "aux" in want:
         result = _with_source_parts(pl, result)
     return result

@@ -85,6 +85,7 @@ from fleetlog.storage.columns import (
 )
 from fleetlog.storage.decompress import LogBytes, compression_of, log_kind, open_bytes
 from fleetlog.storage.ordering import Record
+from fleetlog.storage.select import Selection
 from fleetlog.storage.sessionalog import find_alog
 
 if TYPE_CHECKING:
@@ -387,7 +388,8 @@ class AlogReader:
         where: Callable[[pl.DataFrame], pl.Series] | None,
     ) -> Iterator[tuple[pl.DataFrame, bool]]:
         pl = polars_module()
-        state = PassState(where=where)
+        literals = where.literals if isinstance(where, Selection) else None
+        state = PassState(where=where, literals=literals)
         workers = min(_WORKERS, int(pl.thread_pool_size()))
         pool = ThreadPoolExecutor(workers, "fleetlog-read") if workers > 1 else None
         pending: deque[Future[Parsed]] = deque()
@@ -412,7 +414,7 @@ class AlogReader:
                     # The block ends where an entry starts, so it is whole: parse it while
                     # the next one is read (polars releases the GIL), in order.
                     block, carry = buf[: cut - 1], buf[cut:]
-                    job = PassState(lineno=state.lineno, mark=state.mark, where=where)
+                    job = PassState(state.lineno, state.mark, where=where, literals=literals)
                     state.lineno += block.count(b"\n") + 1
                     state.mark = state.mark or _has_line(block, _MARKING)
                     assert pool is not None
@@ -425,8 +427,9 @@ class AlogReader:
                 # parsing it, after the blocks before it.
                 while pending:
                     yield from self._account(pending.popleft().result(), state)
-                parsed = self._parse(pl, buf[:end], state, want, final=False)
-                kept = buf.count(b"\n", 0, end) + 1 - parsed.consumed
+                # (a view: the block is decoded, not copied first)
+                parsed = self._parse(pl, memoryview(buf)[:end], state, want, final=False)
+                kept = parsed.lines - parsed.consumed
                 carry = buf[line_start(buf, end, kept) :]
                 yield from self._account(parsed, state)
                 state.lineno += parsed.consumed
@@ -509,7 +512,7 @@ class AlogReader:
     def _parse(
         self,
         pl: ModuleType,
-        block: bytes,
+        block: bytes | memoryview,
         state: PassState,
         want: frozenset[str],
         *,
@@ -523,7 +526,7 @@ class AlogReader:
         return parse_block(
             pl,
             text,
-            block if not exact else None,
+            bytes(block) if not exact else None,
             state,
             self.logstart,
             want,

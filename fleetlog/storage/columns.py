@@ -10,11 +10,12 @@ is not UTF-8, so character positions match a ``surrogateescape`` decoding.
 from __future__ import annotations
 
 import codecs
+import functools
 import importlib
 import os
 import sys
 from types import ModuleType
-from typing import Literal
+from typing import Any, Literal
 
 from fleetlog.errors import StorageError
 
@@ -24,6 +25,7 @@ __all__ = [
     "TYPES",
     "Errors",
     "decode_block",
+    "in_memory",
     "limit_threads",
     "polars_module",
 ]
@@ -82,13 +84,29 @@ def polars_module() -> ModuleType:
         raise StorageError(msg) from err
 
 
-def decode_block(block: bytes) -> tuple[str, bool]:
+@functools.cache
+def in_memory(pl: ModuleType) -> Any:
+    """Return the name of polars' in-memory engine, the one the reader's queries run on.
+
+    polars 2 runs a query on its streaming engine unless told otherwise: for the reader's
+    queries (one block, a few MB) that cost a third more CPU and more wall time, on a thread
+    of its own (measured here, one thread: docs/bench.md §9.3). polars 1 calls it ``cpu``
+    before it had the streaming engine's name for it.
+    """
+    try:
+        pl.LazyFrame({"a": [0]}).collect(engine="in-memory")
+    except (TypeError, ValueError):  # pragma: no cover - polars before 1.23
+        return "cpu"
+    return "in-memory"
+
+
+def decode_block(block: bytes | memoryview) -> tuple[str, bool]:
     """Decode log bytes; return the text and whether they were all UTF-8.
 
     A byte that is not UTF-8 becomes one U+FFFD, so the text has a character wherever
     ``surrogateescape`` would, and positions found in it carry over to the exact decoding.
     """
     try:
-        return block.decode("utf-8"), True
+        return str(block, "utf-8"), True
     except UnicodeDecodeError:
-        return block.decode("utf-8", "fleetlog.byte-per-char"), False
+        return str(block, "utf-8", "fleetlog.byte-per-char"), False

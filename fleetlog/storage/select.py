@@ -45,6 +45,25 @@ def glob_regex(pattern: str) -> str:
     return "(?s)^" + "".join(parts) + "$"
 
 
+def glob_literal(pattern: str) -> str:
+    """Return the longest run of a MOOS glob's plain characters: text every match holds."""
+    pieces = pattern.replace("?", "*").split("*")
+    return max(pieces, key=len)
+
+
+def _literals(patterns: Sequence[str]) -> tuple[str, ...] | None:
+    """Texts one of which every name matching one of ``patterns`` holds (None: no such)."""
+    pieces = {glob_literal(p) for p in patterns}
+    if not patterns or "" in pieces:
+        return None
+    try:
+        for piece in pieces:
+            piece.encode("utf-8")  # a lone surrogate is no text polars can search
+    except UnicodeEncodeError:
+        return None
+    return tuple(sorted(pieces))
+
+
 def _any_glob(patterns: Sequence[str]) -> str | None:
     if not patterns:
         return None
@@ -56,6 +75,9 @@ class Selection:
 
     Globs are matched by polars' Rust regular expressions, in linear time, on each block's
     distinct names; nothing here runs a backtracking matcher or holds the GIL for long.
+    :attr:`literals` tells the reader which lines can be kept at all: every name a glob
+    matches holds the glob's longest run of plain characters (``NAV_X`` for ``NAV_X``,
+    ``NAV_`` for ``NAV_*``), so every line it keeps holds one of them.
 
     Args:
         variables: MOOS globs of the variables to keep (none: every variable).
@@ -83,6 +105,9 @@ class Selection:
         self._var_re = _any_glob(self.variables)
         self._source_re = _any_glob(self.sources)
         self._key_re = _any_glob(self.keys)
+        #: Texts one of which the line of every kept entry holds (its variable, source or
+        #: process name holds it), or None: a reader may leave the other lines unparsed.
+        self.literals = _literals(self.variables) or _literals(self.keys) or _literals(self.sources)
 
     @classmethod
     def of(

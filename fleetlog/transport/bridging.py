@@ -24,7 +24,8 @@ import zenoh
 from fleetlog.errors import FormatError, TransportError
 from fleetlog.moos.patterns import chunk_to_name
 from fleetlog.moos.protocol import DataType, Message
-from fleetlog.transport.bus import MoosPublisher, zenoh_time
+from fleetlog.transport.bus import zenoh_time
+from fleetlog.transport.publisher import MoosPublisher
 from fleetlog.transport.session import translate_zerror
 from fleetlog.wire.message import (
     ENCODINGS,

@@ -30,7 +30,8 @@ from typing import Any
 import zenoh
 
 from fleetlog.errors import FormatError, QueryError
-from fleetlog.transport.bus import MoosPublisher, matching
+from fleetlog.transport.bus import matching
+from fleetlog.transport.publisher import MoosPublisher, Sender
 from fleetlog.transport.services import get_replies
 from fleetlog.transport.session import translate_zerror
 from fleetlog.wire.keys import service_key, var_key
@@ -94,6 +95,16 @@ class ReplayLink:
             TransportError: Zenoh refused the put.
         """
         self._data.send(message, vehicle)
+
+    def sender(
+        self, vehicle: str, name: str, kind: Kind, source: str, aux: str, community: str
+    ) -> Sender:
+        """Return a sender of one variable of ``vehicle`` with this origin (BLOCK, reliable).
+
+        Raises:
+            TransportError: the publisher's declaration failed.
+        """
+        return self._data.sender(name, kind, source, aux, community, vehicle)
 
     def wait_for_subscribers(self, timeout: float) -> list[str]:
         """Wait until every vehicle's variables have a subscriber; return those without one.

@@ -12,6 +12,8 @@ every name here.
 
 from __future__ import annotations
 
+import json
+import re
 from dataclasses import dataclass
 from typing import Any
 
@@ -153,12 +155,65 @@ def _loose_record(offset: Any, key: Any, source: Any, kind: Any, text: Any, line
     )
 
 
+# A record line exactly as a vehicle writes it (compact JSON, ASCII or not; the time an
+# integer of at most 18 digits or a JSON float, the line an integer of at most 18 digits: no
+# integer near 64 bits), matched without backtracking (possessive): a line this accepts is
+# one JSON array that _grep_record would take, so such lines can be parsed in one call.
+_STRING = rb'"(?:[^"\\\x00-\x1f]++|\\["\\/bfnrt]|\\u[0-9a-fA-F]{4})*+"'
+_INT = rb"-?(?:0|[1-9][0-9]{0,17})"
+_NUMBER = _INT + rb"(?:\.[0-9]+)?(?:[eE][-+]?[0-9]+)?"
+_RECORD = (
+    rb"\[" + _NUMBER + (rb"," + _STRING) * 2 + rb',"[dsb]",' + _STRING + rb"," + _INT + rb"\]\n"
+)
+_RECORDS = re.compile(rb"(?:" + _RECORD + rb")*+")
+
+
 def decode_grep_lines(data: bytes) -> list[GrepHeader | GrepRecord | GrepEnd]:
     """Read one grep reply (several lines).
+
+    The record lines between a header and an end record, when every one of them is exactly
+    what a vehicle writes, are parsed in one ``json.loads``; any other reply line by line,
+    as before (what each line gives, or the first refusal, is the same either way).
 
     Raises:
         FormatError: a line is not a header, an entry or an end record.
     """
+    start, end = 0, len(data)
+    if data.startswith(b"{"):  # the header, in a stream's first reply
+        start = data.find(b"\n") + 1 or end
+    if data.endswith(b"}\n"):  # the end record, in its last
+        end = data.rfind(b"\n", start, end - 1) + 1 or start
+    records = _records(data[start:end])
+    if records is None:
+        return _decode_lines(data)
+    return [*_decode_lines(data[:start]), *records, *_decode_lines(data[end:])]
+
+
+def _records(body: bytes) -> list[GrepHeader | GrepRecord | GrepEnd] | None:
+    """Parse record lines in one call; None unless every line is exactly a vehicle's record."""
+    if _RECORDS.fullmatch(body) is None:
+        return None
+    try:
+        rows = json.loads(b"[" + body[:-1].replace(b"\n", b",") + b"]")
+    except ValueError:  # bytes that are not UTF-8 inside a string
+        return None
+    new = object.__new__
+    s_offset, s_key, s_source, s_kind, s_text, s_lineno = _RECORD_SETTERS
+    out: list[GrepHeader | GrepRecord | GrepEnd] = []
+    for offset, key, source, kind, text, lineno in rows:
+        record = new(GrepRecord)
+        s_offset(record, float(offset))
+        s_key(record, key)
+        s_source(record, source)
+        s_kind(record, kind)
+        s_text(record, text)
+        s_lineno(record, lineno)
+        out.append(record)
+    return out
+
+
+def _decode_lines(data: bytes) -> list[GrepHeader | GrepRecord | GrepEnd]:
+    """Read a reply's lines one by one, each checked."""
     out: list[GrepHeader | GrepRecord | GrepEnd] = []
     for line in data.splitlines():
         if not line:

@@ -25,10 +25,12 @@ from fleetlog.errors import FormatError
 
 __all__ = [
     "ENCODINGS",
+    "TIME_FIELD",
     "Kind",
     "Meta",
     "MoosMessage",
     "attachment_fields",
+    "attachment_tail",
     "classify_payload",
     "decode_attachment",
     "decode_value",
@@ -184,6 +186,17 @@ def _put_str(out: bytearray, text: str) -> None:
 
 
 _encoded_tails: dict[tuple[str, str, str], bytes] = {}
+#: packs an attachment's time fields: ``encode_attachment(t, s, a, c, o)`` is
+#: ``TIME_FIELD.pack(t) + attachment_tail(s, a, c) + TIME_FIELD.pack(o)``
+TIME_FIELD = _F64
+
+
+def attachment_tail(source: str, aux: str = "", community: str = "") -> bytes:
+    """Return the attachment's bytes between its time and its original time (the strings).
+
+    A publisher whose origin never changes builds them once (:data:`TIME_FIELD`).
+    """
+    return _encoded_tail(source, aux, community)
 
 
 def _encoded_tail(source: str, aux: str, community: str) -> bytes:

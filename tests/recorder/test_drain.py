@@ -21,7 +21,8 @@ from recorder_support import T0, config, rigs  # noqa: F401  (rigs: a fixture)
 from fleetlog.moos.mission import LoggerConfig
 from fleetlog.recorder.drain import Drain, Wake
 from fleetlog.recorder.service import RecorderService, ServiceOptions
-from fleetlog.transport.bus import MoosPublisher, declare_fifo_subscriber
+from fleetlog.transport.bus import declare_fifo_subscriber
+from fleetlog.transport.publisher import MoosPublisher
 from fleetlog.transport.queries import start_query
 from fleetlog.transport.session import SessionOptions, open_session
 from fleetlog.wire.control import CONTROL

@@ -27,7 +27,8 @@ from fleetlog.moos.mission import LoggerConfig
 from fleetlog.recorder import service as service_module
 from fleetlog.recorder.engine import Recorder
 from fleetlog.recorder.service import RecorderService, ServiceOptions
-from fleetlog.transport.bus import MISS_HEARTBEAT, MissCounter, MoosPublisher
+from fleetlog.transport.bus import MISS_HEARTBEAT, MissCounter
+from fleetlog.transport.publisher import MoosPublisher
 from fleetlog.transport.session import SessionOptions, open_session
 from fleetlog.wire.keys import var_key
 from fleetlog.wire.message import MoosMessage

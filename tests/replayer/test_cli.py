@@ -14,6 +14,8 @@ from typer.testing import CliRunner
 from fleetlog.cli.app import app
 from fleetlog.cli.replay import parse_when
 from fleetlog.errors import FleetlogError, UsageError
+from fleetlog.storage.metafile import write_meta
+from fleetlog.wire.session_meta import SessionMeta
 
 ISOLATED = ["--no-keys", "--wait", "0", "--no-multicast-scouting"]
 
@@ -120,3 +122,34 @@ def test_sigint_stops_with_a_summary(
         assert 1 <= int(found.group(1)) < 10
     finally:
         proc.close()
+
+
+def _clock(session: Path, vehicle: str, synchronized: bool | None) -> None:
+    """Give a session fleetlog's metadata, with the clock state its recorder saw."""
+    clock = {} if synchronized is None else {"synchronized": synchronized}
+    meta = SessionMeta("closed", vehicle, session.name, "1", "0", 1.0, 1.0, 2.0, clock=clock)
+    write_meta(session, meta)
+
+
+def test_a_fleet_replay_warns_of_an_unsynchronised_clock(
+    make_session: MakeSession, cli_env: dict[str, str]
+) -> None:
+    alpha = make_session([Line(1.0, "A", "p", 1.0)], vehicle="alpha")
+    bravo = make_session([Line(1.0, "B", "p", 2.0)], vehicle="bravo")
+    charlie = make_session([Line(1.0, "C", "p", 3.0)], vehicle="charlie")
+    _clock(alpha, "alpha", True)
+    _clock(bravo, "bravo", False)  # charlie: written by pLogger, no metadata: not known
+    fleet = run_cli(
+        "replay", str(alpha), str(bravo), str(charlie), "--fast", *ISOLATED, env=cli_env
+    )
+    assert fleet.returncode == 0, fleet.stderr
+    warnings = [line for line in fleet.stderr.splitlines() if "warning" in line]
+    assert warnings == [
+        f"fleetlog: warning: bravo's clock was not synchronised when {bravo} was recorded: on"
+        " one clock with the other vehicles, its entries may be out of place by as much as its"
+        " clock was off"
+    ]
+    # One vehicle plays right whatever its clock: nothing to warn of.
+    alone = run_cli("replay", str(bravo), "--fast", *ISOLATED, env=cli_env)
+    assert alone.returncode == 0, alone.stderr
+    assert "warning" not in alone.stderr

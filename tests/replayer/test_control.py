@@ -18,7 +18,7 @@ import pytest
 import zenoh
 from replay_support import Line, MakeSession, Proc
 
-from fleetlog.transport.bus import MoosPublisher
+from fleetlog.transport.publisher import MoosPublisher
 from fleetlog.transport.session import SessionOptions, open_session
 from fleetlog.wire.keys import service_key
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import gc
 import gzip
 import json
 import threading
@@ -310,6 +311,7 @@ def _peak(session: Path) -> int:
             FakeClock(),
             PlayOptions(rate=None, window=200, dedupe_memory=500),
         )
+        gc.collect()
         tracemalloc.start()
         try:
             summary = player.run()
@@ -328,8 +330,10 @@ def test_memory_does_not_grow_with_the_log(tmp_path: Path) -> None:
     small = write_session(tmp_path / "small", lines(1_000))
     large = write_session(tmp_path / "large", lines(10_000))
     # Ten times the entries, the same peak: what is held is the re-sort window, the
-    # duplicate check's memory and the parser's buffers, all bounded; never the file.
-    assert _peak(large) < 1.2 * _peak(small) + 100_000
+    # duplicate check's memory, a run of entries and the parser's buffers, all bounded;
+    # never the file. (Peaks move by ~100 KB from run to run with what the garbage collector
+    # has not yet freed; 30 bytes an entry kept would add 270 KB.)
+    assert _peak(large) < 1.25 * _peak(small) + 150_000
 
 
 _json_values = st.recursive(

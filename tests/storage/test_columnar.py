@@ -13,62 +13,14 @@ import math
 from pathlib import Path
 
 import pytest
+from alog_cases import BANNER, alog_bytes
 from alog_oracle import AlogReader as OracleReader
 from helpers import REFERENCE
 from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
 
 from fleetlog.errors import FormatError, UsageError
-from fleetlog.moos.alog import BANNER_RULE, Entry, format_banner
+from fleetlog.moos.alog import BANNER_RULE, Entry
 from fleetlog.storage.columnar import SCHEMA, AlogReader, read_tail
-
-BANNER = format_banner("./g/g.alog", 1750334690.048564, "Thu Jan  1 00:00:00 1970")
-
-_name = st.text(st.sampled_from("ABXYZ_09é"), min_size=1, max_size=24)
-_source = st.text(st.sampled_from("pHelm:IvP@ab_9"), min_size=0, max_size=20)
-_time = st.sampled_from(["0.5", "12.25000", "-3.5", "1e3", "100000000000000.1", "7", "1."])
-_value = st.one_of(
-    st.sampled_from(
-        [
-            "1.50000     ",
-            "-0.00000    ",
-            "123456789.12346",
-            "0.5",
-            "nan         ",
-            "D:2.00000      ",
-            "S:true",
-            "S:",
-            "D:x",
-            "<MOOS_BINARY>File=g.blog,Offset=53,Bytes=16</MOOS_BINARY>",
-            "",
-            "  lead",
-            "a\r",
-        ]
-    ),
-    st.text(st.sampled_from("ab =,\n%1 -\x00\u00e9"), max_size=30),
-)
-
-
-@st.composite
-def _line(draw: st.DrawFn) -> str:
-    kind = draw(st.integers(0, 9))
-    if kind == 0:
-        return draw(st.sampled_from(["% a comment", "%% DATATYPE MARKING ON", "stray", ""]))
-    time_text, key, source = draw(_time), draw(_name), draw(_source)
-    value = draw(_value)
-    end = "" if value.startswith("<MOOS") and draw(st.booleans()) else " "
-    return f"{time_text.ljust(15)} {key.ljust(20)} {source.ljust(15)} {value}{end}"
-
-
-@st.composite
-def alog_bytes(draw: st.DrawFn) -> bytes:
-    body = "\n".join(draw(st.lists(_line(), max_size=40)))
-    head = BANNER if draw(st.booleans()) else ""
-    data = (head + body + "\n").encode()
-    if draw(st.booleans()):
-        data = data.replace(b"a", b"\xff", draw(st.integers(0, 3)))
-    cut = draw(st.integers(0, 6))
-    return data[: len(data) - cut] if cut else data
 
 
 def _same(old: list[Entry], new: list[Entry]) -> None:
