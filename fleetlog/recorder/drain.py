@@ -4,8 +4,10 @@ One thread drains the subscribers' FIFO channels (``try_recv``: no Python callba
 file I/O in Zenoh's threads, and a full FIFO makes Zenoh hold BLOCK publishers back instead
 of dropping), hands them to the :class:`~fleetlog.recorder.engine.Recorder` through its
 :class:`~fleetlog.recorder.lane.Lane` (the common samples formatted straight into their
-line, the others decoded and handled), and flushes plain logs as soon as the channels are
-empty, or within 5 ms of a line being written while they are not.
+line, the others decoded and handled), and flushes plain logs as soon as a pass finds the
+channels empty: at once after a pass that took nothing, within 1 ms after passes that take
+samples and then find every channel empty (the recorder keeps up), within 5 ms of a line
+being written while they never empty.
 
 When the channels stay empty the thread sleeps until there is work instead of polling: each
 FIFO's :class:`Inbox` then lends it to a watcher thread blocked in the FIFO's ``recv`` (no
@@ -34,6 +36,10 @@ from fleetlog.transport.session import translate_zerror
 __all__ = ["Drain", "Fifo", "Inbox", "Wake"]
 
 _FLUSH_DELAY = 0.005
+#: how long a line may wait for its flush while each pass takes samples and then finds every
+#: FIFO empty: a flush after every such pass would cost a write per pass at high rates
+#: (a tenth of the loss-free rate); the pass after the next poll flushes it
+_CAUGHT_UP = 0.001
 _TICK = 0.02
 #: samples handed to the lane at a time: between two such runs the drain checks whether a
 #: flush is due and whether the subscriber had its slice (at 2-6 µs per sample, every
@@ -340,10 +346,10 @@ class Drain:
     def step(self) -> int:
         """Run one pass over the FIFOs; return how many samples it handed to the recorder.
 
-        Each FIFO is read until it is empty, its slice is over or 8192 samples were taken;
-        then, if every FIFO was found empty (:attr:`drained`), what was written is flushed
-        at once: a line is readable as soon as the recorder has caught up. While a FIFO
-        still holds samples, lines are flushed once they waited ``_FLUSH_DELAY``.
+        Each FIFO is read until it is empty, its slice is over or 8192 samples were taken.
+        Then what was written is flushed: at once if the pass took nothing; once the oldest
+        line waited ``_CAUGHT_UP`` if every FIFO was found empty (:attr:`drained`: the
+        recorder keeps up); once it waited ``_FLUSH_DELAY`` otherwise.
         """
         recorder = self.recorder
         pump = self._lane().pump
@@ -376,7 +382,7 @@ class Drain:
                 sample = try_recv()
             got += batch
         self.drained = drained
-        if recorder.flush_due(0.0 if drained else _FLUSH_DELAY):
+        if recorder.flush_due(0.0 if not got else _CAUGHT_UP if drained else _FLUSH_DELAY):
             recorder.flush()
         return got
 
