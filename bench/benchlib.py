@@ -75,6 +75,17 @@ def percentile(sorted_values: Sequence[float], q: float) -> float:
     return sorted_values[index]
 
 
+def parse_env(items: Sequence[str] | None) -> dict[str, str]:
+    """Return ``KEY=VALUE`` arguments (``--knob``) as a dict."""
+    env: dict[str, str] = {}
+    for item in items or ():
+        key, sep, value = item.partition("=")
+        if not sep or not key:
+            raise SystemExit(f"expected KEY=VALUE, got {item!r}")
+        env[key] = value
+    return env
+
+
 def loadavg() -> str:
     """Return the 1-minute load average (other engineers share the machine)."""
     try:
@@ -165,11 +176,23 @@ class RecorderProcess:
     """``fleetlog record`` without a mission, as a subprocess in its own directory."""
 
     def __init__(
-        self, workdir: Path, port: int, extra: Sequence[str] = (), tree: Path | None = None
+        self,
+        workdir: Path,
+        port: int,
+        extra: Sequence[str] = (),
+        tree: Path | None = None,
+        env: dict[str, str] | None = None,
     ) -> None:
-        """``tree``: run fleetlog from that source tree (``PYTHONPATH``: a before/after pair)."""
+        """``tree``: run fleetlog from that source tree (``PYTHONPATH``: a before/after pair).
+
+        ``env``: more environment variables for the recorder alone (a Zenoh setting such as
+        ``ZENOH_RUNTIME``, measured against the default in the same round).
+        """
         self.workdir = workdir
-        env = None if tree is None else {**os.environ, "PYTHONPATH": str(tree)}
+        more = dict(env or {})
+        if tree is not None:
+            more["PYTHONPATH"] = str(tree)
+        full = {**os.environ, **more} if more else None
         self.proc = subprocess.Popen(
             [
                 sys.executable,
@@ -184,7 +207,7 @@ class RecorderProcess:
                 *extra,
             ],
             cwd=workdir,
-            env=env,
+            env=full,
             stderr=subprocess.PIPE,
             stdout=subprocess.DEVNULL,
             text=True,

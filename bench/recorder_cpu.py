@@ -24,7 +24,9 @@ messages: median [min–max] over the rounds, with the load average beside it::
     MOOS_BIN=/path/to/core-moos/build/bin python bench/recorder_cpu.py -n 100000 --rounds 3
 
 ``--also TREE`` adds, in each round, the same fleetlog round run from another source tree
-(``PYTHONPATH=TREE``), for a before/after pair in one run.
+(``PYTHONPATH=TREE``), for a before/after pair in one run. ``--knob KEY=VALUE`` (repeatable)
+adds the same fleetlog round of this tree with those environment variables for the recorder
+alone (a Zenoh setting, e.g. ``--knob 'ZENOH_RUNTIME=(rx: (worker_threads: 1))'``).
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ from benchlib import (
     cpu_ns,
     free_port,
     loadavg,
+    parse_env,
     spread,
 )
 
@@ -81,9 +84,11 @@ def wait_lines(
     return count
 
 
-def fleetlog_round(n: int, rate: float, work: Path, tree: Path | None = None) -> dict[str, float]:
+def fleetlog_round(
+    n: int, rate: float, work: Path, tree: Path | None = None, env: dict[str, str] | None = None
+) -> dict[str, float]:
     port = free_port()
-    rec = RecorderProcess(work, port, tree=tree)
+    rec = RecorderProcess(work, port, tree=tree, env=env)
     pub = Helper(
         "publisher",
         ["--connect", f"tcp/127.0.0.1:{port}", "-n", str(n), "--keys", "1", "--rate", str(rate)],
@@ -162,7 +167,14 @@ def main() -> int:
     parser.add_argument(
         "--also", type=Path, help="a second fleetlog source tree, run in each round (before/after)"
     )
+    parser.add_argument(
+        "--knob",
+        action="append",
+        metavar="KEY=VALUE",
+        help="also this tree's recorder with this environment variable, in each round",
+    )
     args = parser.parse_args()
+    knob = parse_env(args.knob)
     folder = os.environ.get("MOOS_BIN", "")
     moos_bin = Path(folder) if folder and (Path(folder) / "pLogger").is_file() else None
     if moos_bin is None:
@@ -177,6 +189,9 @@ def main() -> int:
         if args.also is not None:
             with tempfile.TemporaryDirectory(prefix="fleetlog-cpu-also-") as tmp:
                 row["also"] = fleetlog_round(args.n, args.rate, Path(tmp), args.also)["fleetlog"]
+        if knob:
+            with tempfile.TemporaryDirectory(prefix="fleetlog-cpu-knob-") as tmp:
+                row["knob"] = fleetlog_round(args.n, args.rate, Path(tmp), env=knob)["fleetlog"]
         if moos_bin is not None:
             with tempfile.TemporaryDirectory(prefix="fleetlog-cpu-moos-") as tmp:
                 row.update(plogger_round(args.n, args.rate, moos_bin, args.plogger_tick, Path(tmp)))
@@ -199,6 +214,10 @@ def main() -> int:
         print(f"  the same, {args.also}  {spread(col('also'), '{:.3f}')}")
         ratios = [r["also"] / r["fleetlog"] for r in rounds]
         print(f"  {args.also} / this tree: {spread(ratios, '{:.2f}')}x")
+    if knob:
+        print(f"  the same with {' '.join(args.knob)}  {spread(col('knob'), '{:.3f}')}")
+        ratios = [r["knob"] / r["fleetlog"] for r in rounds]
+        print(f"  with the knob / without: {spread(ratios, '{:.2f}')}x")
     if moos_bin is not None:
         both = [r["pLogger"] + r["MOOSDB"] for r in rounds]
         print(f"  pLogger             {spread(col('pLogger'), '{:.3f}')}")

@@ -19,6 +19,10 @@ figures are the median [min–max] over rounds, ratios are taken within each rou
     python bench/recorder_rate.py                 # 200k samples, 4 keys, 3 rounds
     python bench/recorder_rate.py -n 100000 --rounds 5
     python bench/recorder_rate.py --only bare --only recorder --also /path/to/old/tree
+    python bench/recorder_rate.py --only bare --only recorder --knob 'ZENOH_RUNTIME=(...)'
+
+``--knob KEY=VALUE`` (repeatable) adds, in each round, (c) with those environment variables
+for the recorder alone (a Zenoh setting), against (c) without them.
 """
 
 from __future__ import annotations
@@ -39,6 +43,7 @@ from benchlib import (
     free_port,
     key_names,
     loadavg,
+    parse_env,
     spread,
     summary_counts,
 )
@@ -100,11 +105,16 @@ def run_format(n: int, keys: int, workdir: Path) -> dict[str, float]:
 
 
 def run_recorder(
-    n: int, keys: int, workdir: Path, raw: bool, tree: Path | None = None
+    n: int,
+    keys: int,
+    workdir: Path,
+    raw: bool,
+    tree: Path | None = None,
+    env: dict[str, str] | None = None,
 ) -> dict[str, object]:
     """(c) ``fleetlog record`` as a subprocess, tailing its alog for the end marker."""
     port = free_port()
-    rec = RecorderProcess(workdir, port, tree=tree)
+    rec = RecorderProcess(workdir, port, tree=tree, env=env)
     pub: Helper | None = None
     try:
         tail = Tail(rec.alog)
@@ -156,10 +166,19 @@ def main() -> int:
     parser.add_argument(
         "--also", type=Path, help="(c) also from this source tree, in each round (before/after)"
     )
+    parser.add_argument(
+        "--knob",
+        action="append",
+        metavar="KEY=VALUE",
+        help="(c) also with this environment variable for the recorder, in each round",
+    )
     args = parser.parse_args()
+    knob = parse_env(args.knob)
     which = args.only or ["bare", "format", "recorder"]
     if args.also is not None:
         which.append("also")
+    if knob:
+        which.append("knob")
     n, keys = args.n, args.keys
     feed = "pre-encoded zenoh puts" if args.raw else "MoosPublisher"
     print(
@@ -181,12 +200,13 @@ def main() -> int:
                     rundir = workdir / f"{w}{r}"
                     rundir.mkdir()
                     tree = args.also if w == "also" else None
-                    res = run_recorder(n, keys, rundir, args.raw, tree)
+                    env = knob if w == "knob" else None
+                    res = run_recorder(n, keys, rundir, args.raw, tree, env)
                     if not res["loss_free"]:
                         ok = False
                 results[w].append(res)
                 extra = ""
-                if w in ("recorder", "also"):
+                if w in ("recorder", "also", "knob"):
                     verdict = "loss-free" if res["loss_free"] else f"LOSS: {res['summary']}"
                     extra = f" ({verdict})"
                 line.append(f"{w} {res['rate']:,.0f}/s{extra}")
@@ -208,13 +228,21 @@ def main() -> int:
         print("  loss-free in every run" if free else "  LOSS in some run")
     if "also" in which:
         print(f"  (c) from {args.also}  {spread(rates('also'))}")
+    if "knob" in which:
+        free = all(bool(x["loss_free"]) for x in results["knob"])
+        print(f"  (c) with {' '.join(args.knob)}  {spread(rates('knob'))}", end="")
+        print("  loss-free in every run" if free else "  LOSS in some run")
     if "bare" in which:
         pairs = [("recorder", "recorder / bare"), ("format", "format / bare")]
         pairs.append(("also", "(c) from --also / bare"))
+        pairs.append(("knob", "(c) with --knob / bare"))
         for w, label in pairs:
             if w in which:
                 ratios = [a / b for a, b in zip(rates(w), rates("bare"), strict=True)]
                 print(f"  {label:<26} {spread(ratios, '{:.2f}')}×")
+    if "recorder" in which and "knob" in which:
+        ratios = [a / b for a, b in zip(rates("knob"), rates("recorder"), strict=True)]
+        print(f"  {'with --knob / without':<26} {spread(ratios, '{:.2f}')}×")
     if "recorder" in which and "format" in which:
         ratios = [a / b for a, b in zip(rates("recorder"), rates("format"), strict=True)]
         print(f"  {'recorder / format':<26} {spread(ratios, '{:.2f}')}×")

@@ -57,7 +57,12 @@ from fleetlog.storage.columnar import limit_threads
 from fleetlog.storage.heap import HeapKeeper
 from fleetlog.transport.notify import Notifier, Watchdog
 from fleetlog.transport.queries import ZenohSession
-from fleetlog.transport.session import SessionOptions, open_session, summarize
+from fleetlog.transport.session import (
+    SessionOptions,
+    open_session,
+    prefer_runtime,
+    summarize,
+)
 
 __all__ = ["load_config", "read_mission", "record"]
 
@@ -364,6 +369,9 @@ def record(
     # Greps and listings in this process parse logs with polars: one thread for them, so that
     # analysis never takes the cores the recorder's drain thread needs (before polars loads).
     limit_threads(1)
+    # Zenoh's receiving threads watch the links themselves: no thread switch per message
+    # (before the first session; an operator's ZENOH_RUNTIME wins).
+    prefer_runtime()
     key_root = checked_root(root)
     # A vehicle records whatever the network does: never wait for, nor give up on, a router.
     zopts = dataclasses.replace(

@@ -4,8 +4,10 @@ One thread drains the subscribers' FIFO channels (``try_recv``: no Python callba
 file I/O in Zenoh's threads, and a full FIFO makes Zenoh hold BLOCK publishers back instead
 of dropping), hands them to the :class:`~fleetlog.recorder.engine.Recorder` through its
 :class:`~fleetlog.recorder.lane.Lane` (the common samples formatted straight into their
-line, the others decoded and handled), and flushes plain logs as soon as the channels are
-empty, or within 5 ms of a line being written while they are not.
+line, the others decoded and handled), and flushes plain logs as soon as a pass finds the
+channels empty: at once after a pass that took nothing, within 1 ms after passes that take
+samples and then find every channel empty (the recorder keeps up), within 5 ms of a line
+being written while they never empty.
 
 When the channels stay empty the thread sleeps until there is work instead of polling: each
 FIFO's :class:`Inbox` then lends it to a watcher thread blocked in the FIFO's ``recv`` (no
@@ -34,6 +36,10 @@ from fleetlog.transport.session import translate_zerror
 __all__ = ["Drain", "Fifo", "Inbox", "Wake"]
 
 _FLUSH_DELAY = 0.005
+#: how long a line may wait for its flush while each pass takes samples and then finds every
+#: FIFO empty: a flush after every such pass would cost a write per pass at high rates
+#: (a tenth of the loss-free rate); the pass after the next poll flushes it
+_CAUGHT_UP = 0.001
 _TICK = 0.02
 #: samples handed to the lane at a time: between two such runs the drain checks whether a
 #: flush is due and whether the subscriber had its slice (at 2-6 µs per sample, every
@@ -42,7 +48,10 @@ _CHECK_EVERY = 32
 #: the longest one subscriber's batch may hold the drain thread before the others get a
 #: turn: a flood of costly commands on one key must not hold back the variables on the rest
 _SLICE = 0.01
-#: empty passes (1 ms apart) before the drain thread sleeps until there is work: a steady
+#: the wait between two passes that found the FIFOs empty, while samples still come: the
+#: longest a sample waits in its FIFO then (and every pass costs a wake-up of this thread)
+_POLL = 0.001
+#: empty passes (_POLL apart) before the drain thread sleeps until there is work: a steady
 #: stream keeps it polling, which batches samples per pass (one write per batch), and a
 #: handover to a watcher thread costs a few thread switches
 _SPIN = 4
@@ -209,8 +218,12 @@ class Drain:
         self._drained_at = 0.0
         #: how many times the thread slept until there was work (tests, benchmarks)
         self.sleeps = 0
-        #: the running drain's fast lane (tests, benchmarks)
+        #: the general way's decoder (the lane shares its caches)
+        self._decoder = SampleDecoder(var_prefix)
+        #: the drain's fast lane, made at the first pass (tests, benchmarks)
         self.lane: Lane | None = None
+        #: whether the last :meth:`step` found every FIFO it read empty
+        self.drained = True
 
     def add(self, sub: Fifo) -> None:
         """Drain one more subscriber (from any point of the drain thread's work)."""
@@ -323,47 +336,70 @@ class Drain:
         with self.wake.signals():
             self._run()
 
+    def _lane(self) -> Lane:
+        """Return the drain thread's lane (made at its first use)."""
+        lane = self.lane
+        if lane is None:
+            lane = self.lane = Lane(self.recorder, self._decoder, self.misses.seen)
+        return lane
+
+    def step(self) -> int:
+        """Run one pass over the FIFOs; return how many samples it handed to the recorder.
+
+        Each FIFO is read until it is empty, its slice is over or 8192 samples were taken.
+        Then what was written is flushed: at once if the pass took nothing; once the oldest
+        line waited ``_CAUGHT_UP`` if every FIFO was found empty (:attr:`drained`: the
+        recorder keeps up); once it waited ``_FLUSH_DELAY`` otherwise.
+        """
+        recorder = self.recorder
+        pump = self._lane().pump
+        monotonic = time.monotonic
+        got = 0
+        drained = True
+        for inbox in self.inboxes:
+            if inbox.lent:
+                continue  # empty when it was lent; its watcher wakes the thread for more
+            try_recv = inbox.sub.try_recv
+            batch = 0
+            began = monotonic()
+            sample = inbox.held
+            if sample is None:
+                sample = try_recv()
+            else:
+                inbox.held = None
+            while sample is not None:
+                # _CHECK_EVERY samples at a time (fewer: the FIFO is empty), then whether
+                # a flush is due and whether this subscriber had its slice.
+                done = pump(sample, try_recv, _CHECK_EVERY)
+                batch += done
+                if done < _CHECK_EVERY:
+                    break
+                if recorder.flush_due(_FLUSH_DELAY):
+                    recorder.flush()
+                if monotonic() - began > _SLICE or batch >= 8192:
+                    drained = False
+                    break
+                sample = try_recv()
+            got += batch
+        self.drained = drained
+        if recorder.flush_due(0.0 if not got else _CAUGHT_UP if drained else _FLUSH_DELAY):
+            recorder.flush()
+        return got
+
     def _run(self) -> None:
         recorder = self.recorder
-        decoder = SampleDecoder(self._prefix)
-        lane = self.lane = Lane(recorder, decoder, self.misses.seen)
-        pump = lane.pump
+        decoder = self._decoder
+        step = self.step
         monotonic = time.monotonic
+        sleep = time.sleep
         next_tick = 0.0
         idle = 0
         stop = self._stop
         commands = recorder.commands
         watchdog = self._watchdog
-        inboxes = self.inboxes
         while not stop.is_set():
-            got = 0
-            for inbox in inboxes:
-                if inbox.lent:
-                    continue
-                try_recv = inbox.sub.try_recv
-                batch = 0
-                began = monotonic()
-                sample = inbox.held
-                if sample is None:
-                    sample = try_recv()
-                else:
-                    inbox.held = None
-                while sample is not None:
-                    # _CHECK_EVERY samples at a time (fewer: the FIFO is empty), then whether
-                    # a flush is due and whether this subscriber had its slice.
-                    done = pump(sample, try_recv, _CHECK_EVERY)
-                    batch += done
-                    if done < _CHECK_EVERY:
-                        break
-                    if recorder.flush_due(_FLUSH_DELAY):
-                        recorder.flush()
-                    if monotonic() - began > _SLICE or batch >= 8192:
-                        break
-                    sample = try_recv()
-                got += batch
+            got = step()
             now = monotonic()
-            if recorder.flush_due(0.0 if not got else _FLUSH_DELAY):
-                recorder.flush()
             if commands.pending:
                 # One control command per pass, between batches (as a PLOGGER_CMD costs).
                 commands.run_queued()
@@ -382,7 +418,7 @@ class Drain:
             else:
                 idle += 1
                 if idle <= _SPIN:
-                    # A line still reaches the OS within the bound.
-                    time.sleep(0.001)
+                    # Samples that come meanwhile wait for the next pass at most this long.
+                    sleep(_POLL)
                 elif not stop.is_set():
                     self._sleep()

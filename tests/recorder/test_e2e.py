@@ -629,6 +629,46 @@ def test_api_waits_for_a_subscriber(record: Callable[..., Recorder], endpoint: s
     assert rec.stop() == 0
 
 
+def zenoh_threads(pid: int) -> list[str]:
+    """The names of a process's Zenoh runtime threads (``rx-0``, ``acc-0``, ...)."""
+    names = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        try:
+            name = (task / "comm").read_text().strip()
+        except OSError:
+            continue  # a thread that ended
+        if re.fullmatch(r"(rx|tx|acc|net|app)-\d+", name):
+            names.append(name)
+    return sorted(names)
+
+
+def test_the_receiving_threads_watch_the_links_themselves(
+    record: Callable[..., Recorder], endpoint: str, cli_env: dict[str, str]
+) -> None:
+    """No Zenoh thread of its own watches the links a recorder accepts or opens.
+
+    Such a thread wakes a receiving thread for every message that travels alone (docs/
+    bench.md §15). An operator's ZENOH_RUNTIME still wins.
+    """
+    options = SessionOptions(listen=(endpoint,), multicast_scouting=False)
+    with Vehicle("alpha", source="iTest", options=options) as v:
+        rec = record("--vehicle", "alpha", "-e", endpoint, listen=f"tcp/127.0.0.1:{free_port()}")
+        assert v.wait_for_subscriber("NAV_X", timeout=10.0)
+        v.publish("NAV_X", 1.0)
+        assert v.confirm(timeout=10.0)
+        threads = zenoh_threads(rec.proc.pid)
+        assert "rx-0" in threads
+        assert not [t for t in threads if t.startswith(("acc-", "net-"))], threads
+        assert rec.stop() == 0
+        cli_env["ZENOH_RUNTIME"] = "(rx: (worker_threads: 1))"
+        mine = record("--vehicle", "alpha", "-e", endpoint, listen=f"tcp/127.0.0.1:{free_port()}")
+        assert v.wait_for_subscriber("NAV_X", timeout=10.0)
+        threads = zenoh_threads(mine.proc.pid)
+        assert "acc-0" in threads
+        assert "rx-1" not in threads
+        assert mine.stop() == 0
+
+
 def test_poke_names_several_recorders(
     record: Callable[..., Recorder], tmp_path: Path, endpoint: str, cli_env: dict[str, str]
 ) -> None:
