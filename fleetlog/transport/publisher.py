@@ -158,24 +158,17 @@ class MoosPublisher:
         Raises:
             TransportError: Zenoh refused the put.
         """
-        kind, payload = encode_value(value)
         veh = self.vehicle if vehicle is None else vehicle
-        key = self._key(veh, name)
-        attachment = encode_attachment(
+        self._put(
+            name,
+            value,
             self._clock() if time is None else time,
             self.source if source is None else source,
             aux,
             veh if community is None else community,
             original_time,
+            veh,
         )
-        pub = self._publishers.get((key, kind))
-        if pub is None:
-            pub = self._publisher(key, kind)
-        try:
-            pub.put(payload, attachment=attachment)
-        except zenoh.ZError as err:
-            msg = f"could not publish {name!r} on {key!r}: {err}"
-            raise TransportError(msg) from err
 
     def _put(
         self,
@@ -188,7 +181,7 @@ class MoosPublisher:
         original_time: float | None,
         vehicle: str,
     ) -> None:
-        """:meth:`publish` with every field given, for :meth:`send` (no keyword handling)."""
+        """Put one message, every field given (:meth:`publish` and :meth:`send`; no keywords)."""
         kind, payload = encode_value(value)
         key = self._key(vehicle, name)
         attachment = encode_attachment(time, source, aux, community, original_time)
