@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from typing import NamedTuple
 
 from fleetlog.errors import FormatError
+from fleetlog.moos.patterns import NAMES_CACHED
 
 __all__ = [
     "BANNER_RULE",
@@ -285,7 +286,7 @@ class LineFormatter:
         prefix = self._prefixes.get(pair)
         if prefix is None:
             prefix = f"{key.ljust(20)} {source.ljust(15)} "
-            if len(self._prefixes) > 65536:  # bound the cache against key floods
+            if len(self._prefixes) > NAMES_CACHED:  # bound the cache against key floods
                 self._prefixes.clear()
             self._prefixes[pair] = prefix
         return prefix

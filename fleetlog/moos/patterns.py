@@ -47,6 +47,7 @@ __all__ = [
     "ALWAYS_LOGGED",
     "ALWAYS_OMITTED",
     "EMPTY_NAME_CHUNK",
+    "NAMES_CACHED",
     "MoosGlob",
     "Verdict",
     "WildcardClassifier",
@@ -58,6 +59,12 @@ __all__ = [
     "name_to_chunk",
     "reduce_chunks",
 ]
+
+#: How many names (variables, keys, key and source pairs) each of a recorder's per-name
+#: caches holds before it starts again. A vehicle posts hundreds to a few thousand variables;
+#: a peer that sprays new names makes each cache start again every few thousand names
+#: instead of pinning tens of MB (each entry is rebuilt on its next use).
+NAMES_CACHED = 8192
 
 #: The chunk that stands for the empty name.
 EMPTY_NAME_CHUNK = "%00"
@@ -450,7 +457,7 @@ class WildcardClassifier:
         exclusion_log: bool = False,
         *,
         wildcard_enabled: bool = True,
-        cache_size: int = 65536,
+        cache_size: int = NAMES_CACHED,
     ) -> None:
         self._log_vars: dict[str, None] = dict.fromkeys(log_vars)
         self._patterns = tuple(MoosGlob(p) for p in dict.fromkeys(patterns))

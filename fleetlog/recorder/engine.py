@@ -21,7 +21,7 @@ from fleetlog.errors import FleetlogError, MissionError, RecorderError, StorageE
 from fleetlog.moos.alog import LineFormatter, Variant
 from fleetlog.moos.mission import LoggerConfig, LogSpec, parse_log_spec
 from fleetlog.moos.naming import copy_file_name
-from fleetlog.moos.patterns import Verdict, WildcardClassifier, name_to_chunk
+from fleetlog.moos.patterns import NAMES_CACHED, Verdict, WildcardClassifier, name_to_chunk
 from fleetlog.moos.slog import SlogTable, SlotPatch
 from fleetlog.recorder.clocksync import clock_state
 from fleetlog.recorder.control import (
@@ -244,13 +244,25 @@ class Recorder(Intake):
         var.plain = (
             verdict is Verdict.ALOG and period == 0.0 and not system and name not in self._cmd_names
         )
-        if len(self._vars) > 65536:
-            self._vars.clear()
-            self._app.subscribed.clear()
+        if len(self._vars) > NAMES_CACHED:
+            self._forget_vars()
         if verdict is not Verdict.IGNORE:
             self._app.subscribed.add(name)
         self._vars[name] = var
         return var
+
+    def _forget_vars(self) -> None:
+        """Start the per-variable cache again (a flood of new names), keeping what has state.
+
+        A throttled variable keeps its last logged time and a monitored one its last seen
+        time: a flood of other names must change neither what is logged nor what is reported.
+        """
+        monitored = set(self.monitored)
+        kept = {n: v for n, v in self._vars.items() if v.period > 0.0 or n in monitored}
+        self._vars.clear()
+        self._vars.update(kept)
+        subscribed = self._app.subscribed
+        subscribed.intersection_update(kept)
 
     # ---------------------------------------------------------------------------------------
     # Commands

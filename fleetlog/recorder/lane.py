@@ -23,6 +23,7 @@ import struct
 from collections.abc import Callable
 from typing import Any
 
+from fleetlog.moos.patterns import NAMES_CACHED
 from fleetlog.recorder.intake import Intake
 from fleetlog.recorder.snapshot_mode import SKEW_TOLERANCE
 from fleetlog.transport.bus import DOUBLE_ENCODING, STRING_ENCODING, SampleDecoder
@@ -34,10 +35,10 @@ _unpack_time = struct.Struct("<d").unpack_from
 #: a tail whose formats were never looked for
 _UNKNOWN: Any = object()
 #: bounds on the caches against floods of keys or publishers: keys, origins per key, and
-#: line formats in all (about 16 MB at most)
-_MAX_KEYS = 65536
+#: line formats in all (about 2 MB at most)
+_MAX_KEYS = NAMES_CACHED
 _MAX_TAILS = 64
-_MAX_FORMATS = 65536
+_MAX_FORMATS = 2 * NAMES_CACHED
 
 
 class _Plan:

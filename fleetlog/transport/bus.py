@@ -18,6 +18,7 @@ import zenoh
 import zenoh.ext
 
 from fleetlog.errors import FormatError
+from fleetlog.moos.patterns import NAMES_CACHED
 from fleetlog.transport.session import translate_zerror
 from fleetlog.wire.fields import clean_name, clean_origin, clean_value, time_ok
 from fleetlog.wire.message import (
@@ -116,7 +117,7 @@ class SampleDecoder:
                     name = chunk_to_name(chunk)
                 except FormatError:
                     name = None
-        if len(self._names) > 65536:
+        if len(self._names) > NAMES_CACHED:
             self._names.clear()
             self._escaped.clear()
         if name is not None:

@@ -30,6 +30,7 @@ from fleetlog.moos.alog import BinaryRef, Entry, Variant, format_banner
 from fleetlog.moos.blog import payload_at
 from fleetlog.moos.mission import LoggerConfig, parse_mission
 from fleetlog.moos.naming import ctime_text, session_root
+from fleetlog.moos.patterns import NAMES_CACHED
 from fleetlog.moos.slog import SLOT_WIDTH, format_label_block, format_row
 from fleetlog.moos.slog_read import parse_slog
 from fleetlog.moos.ylog import format_ylog_line, parse_ylog
@@ -284,6 +285,34 @@ def test_monitor_every_ten_seconds_with_plogger_text(rigs: Callable[..., Rig]) -
     )
     ylog = parse_ylog(rig.read(".ylog"))
     assert [y.text for y in ylog.entries][:1] == ["2 monitored variables are not being logged"]
+
+
+def test_a_flood_of_new_names_is_bounded_and_changes_no_throttle_nor_monitor(
+    rigs: Callable[..., Rig],
+) -> None:
+    # A peer spraying new names makes the per-name caches start again, many times: memory
+    # stays bounded, and the state of throttled and monitored variables survives it.
+    rig = rigs("""
+        WildcardLogging = true
+        Log = SLOW @ 1.0
+        Log = WATCHED @ 0 MONITOR
+    """)
+    rig.take("LOGGER_DIRECTORY")
+    rig.send("SLOW", 1.0, at=1.0)
+    rig.send("WATCHED", 1.0, at=1.0)
+    flood = 3 * NAMES_CACHED + 17
+    for i in range(flood):
+        rig.send(f"JUNK_{i}", float(i), at=1.0 + 0.5 * i / flood)
+        assert len(rig.rec._vars) <= NAMES_CACHED + 3
+    rig.send("SLOW", 2.0, at=1.75)  # inside SLOW's second: throttled, as without the flood
+    rig.send("SLOW", 3.0, at=2.0)
+    rig.clock.at(10.5)
+    rig.rec.tick()
+    assert rig.debugs() == []  # WATCHED was seen 9.5 s ago: not missing
+    assert [e.value for e in rig.entries() if e.key == "SLOW"] == [1.0, 3.0]
+    assert sum(1 for e in rig.entries() if e.key.startswith("JUNK_")) == flood
+    assert rig.rec.stats.throttled == 1
+    assert len(rig.rec._classifier._cache) <= NAMES_CACHED
 
 
 def test_logger_directory_at_start_and_every_ten_seconds(rigs: Callable[..., Rig]) -> None:
