@@ -44,11 +44,27 @@ STATUS_KEYS = ("received", "logged", "lost", "garbled", "skewed", "write_errors"
 MISSION = "ProcessConfig = pLogger\n{\n  Path = ./logs\n  WildcardLogging = true\n}\n"
 
 
-def rss_kb(pid: int) -> int:
+#: the parts of the resident set sampled: the whole, the heap's (anonymous) and the mapped
+#: files' (the interpreter's and the libraries' code, which grows as code paths are first run)
+RSS_PARTS = ("VmRSS", "RssAnon", "RssFile")
+
+
+def rss_kb(pid: int) -> dict[str, int]:
+    """Return the process's resident set and its parts, in KiB (``/proc/PID/status``)."""
+    parts = dict.fromkeys(RSS_PARTS, 0)
     for line in Path(f"/proc/{pid}/status").read_text().splitlines():
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1])
-    return 0
+        name, _, value = line.partition(":")
+        if name in parts:
+            parts[name] = int(value.split()[0])
+    return parts
+
+
+def per_minute(samples: list[tuple[float, dict[str, int], Any]], part: str) -> list[float]:
+    """Return the median of ``part`` in each minute of the run, in MiB."""
+    minutes: dict[int, list[int]] = {}
+    for t, kb, _ in samples:
+        minutes.setdefault(int(t // 60), []).append(kb[part])
+    return [round(statistics.median(v) / 1024, 1) for _, v in sorted(minutes.items())]
 
 
 #: the first failures of each shore loop: (seconds into the soak, exit code, last stderr line)
@@ -199,7 +215,7 @@ def main() -> int:
             loop.start()
         if not args.no_garbage:
             bad.start()
-        samples: list[tuple[float, int, dict[str, Any]]] = []
+        samples: list[tuple[float, dict[str, int], dict[str, Any]]] = []
         started = time.monotonic()
         next_restart = started + args.restart
         end = started + args.minutes * 60
@@ -217,7 +233,8 @@ def main() -> int:
                     continue
             samples.append((now - started, rss_kb(rec.pid), body))
             print(
-                f"{now - started:6.0f} s  rss {samples[-1][1] / 1024:6.1f} MiB  received "
+                f"{now - started:6.0f} s  rss {samples[-1][1]['VmRSS'] / 1024:6.1f} MiB (anon "
+                f"{samples[-1][1]['RssAnon'] / 1024:.1f})  received "
                 f"{body.get('received', '?')}  lost {body.get('lost', '?')}  sessions "
                 f"{body.get('sessions', '?')}  max_lag {body.get('max_lag', 0):.3f} s",
                 flush=True,
@@ -269,8 +286,16 @@ def main() -> int:
             j = len(seen) if j == -1 else j
             holes.append((i, j - i, round(published[-1] - published[i], 3)))
             i = seen.find(0, j)
+        # RSS flat: the median of the last minute against the second minute's, for the whole
+        # resident set and for its anonymous part (the heap; the mapped files' part is code).
         minute2 = [kb for t, kb, _ in samples if 60 <= t < 120] or [samples[0][1]]
         last = [kb for t, kb, _ in samples if t >= samples[-1][0] - 60]
+
+        def ratio(part: str) -> float:
+            return statistics.median(k[part] for k in last) / statistics.median(
+                k[part] for k in minute2
+            )
+
         final = samples[-1][2]
         result = {
             "minutes": args.minutes,
@@ -285,9 +310,11 @@ def main() -> int:
             "sessions": len(sessions),
             "states": states,
             "gap_reasons": reasons,
-            "rss_minute2_mib": statistics.median(minute2) / 1024,
-            "rss_last_minute_mib": statistics.median(last) / 1024,
-            "rss_ratio": statistics.median(last) / statistics.median(minute2),
+            "rss_minute2_mib": statistics.median(k["VmRSS"] for k in minute2) / 1024,
+            "rss_last_minute_mib": statistics.median(k["VmRSS"] for k in last) / 1024,
+            "rss_ratio": ratio("VmRSS"),
+            "rss_anon_ratio": ratio("RssAnon"),
+            "rss_per_minute_mib": {part: per_minute(samples, part) for part in RSS_PARTS},
             "fetch_runs": loops[0].runs,
             "fetch_failed": loops[0].failures,
             "grep_runs": loops[1].runs,
