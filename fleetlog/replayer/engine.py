@@ -22,6 +22,9 @@ batches (within a batch uPlayBack posts newest first); values are read by the §
 and keeps pLogger's terminator space); duplicates are dropped (see
 :mod:`fleetlog.replayer.schedule`).
 
+Commands (pause, rate, seek, step) are applied between two entries by the mixin in
+:mod:`fleetlog.replayer.player_commands`.
+
 Threads: :meth:`Player.run` runs in one thread; :meth:`Player.submit`,
 :meth:`Player.heartbeat` and :meth:`Player.status` may be called from any other. Periodic
 work such as a progress display runs in the player's thread through
@@ -41,21 +44,14 @@ from fleetlog.moos.alog import BinaryRef
 from fleetlog.replayer.clock import Clock
 from fleetlog.replayer.control import (
     Command,
-    Pause,
-    Resume,
-    Seek,
-    SetRate,
-    Step,
     Stop,
-    Toggle,
-    check_rate,
-    next_rate,
 )
 from fleetlog.replayer.filters import EntryFilter
 from fleetlog.replayer.inputs import ReplayInput
 from fleetlog.replayer.items import KEY, LATE, ORIGIN, SOURCE, TIME, VALUE, Item
 from fleetlog.replayer.options import PlayOptions
 from fleetlog.replayer.output import Output, Prepare, Publish, Senders
+from fleetlog.replayer.player_commands import PlayerCommands
 from fleetlog.replayer.report import Lateness, State, Status, Summary, VehicleCounts
 from fleetlog.replayer.schedule import Schedule
 from fleetlog.wire.message import Kind
@@ -71,7 +67,7 @@ IDLE_SLACK = 0.005
 IDLE_FORCE = 1.0
 
 
-class Player:
+class Player(PlayerCommands):
     """Replays inputs on one clock; see the module docstring.
 
     Args:
@@ -483,124 +479,6 @@ class Player:
             value = max(value, self._anchor_log + (tick_end - self._anchor_now) * self._rate)
         value = min(value, max(self._stop_time, item[TIME]))
         self._out.db_time(vehicle, value, wall)
-
-    # -- commands
-
-    def _apply_commands(self) -> None:
-        if self._commands.empty():  # the common case, checked without an exception
-            return
-        while True:
-            try:
-                command, future = self._commands.get_nowait()
-            except queue.Empty:
-                return
-            if not future.set_running_or_notify_cancel():
-                continue
-            try:
-                self._apply(command)
-            except ReplayError as err:
-                future.set_exception(err)
-            else:
-                future.set_result(self.status())
-
-    def _fail_pending(self) -> None:
-        while True:
-            try:
-                _, future = self._commands.get_nowait()
-            except queue.Empty:
-                return
-            if future.set_running_or_notify_cancel():
-                future.set_exception(ReplayError("the replay has ended"))
-
-    def _pause(self) -> None:
-        with self._lock:
-            if self._state in (State.PLAYING, State.WAITING):
-                self._frozen = self._position_locked()
-                self._state = State.PAUSED
-
-    def _resume(self) -> None:
-        with self._lock:
-            if self._state is State.PAUSED:
-                self._state = State.PLAYING
-                self._set_anchor(self._frozen)
-        self._out.new_tick()
-
-    def _apply(self, command: Command) -> None:
-        if isinstance(command, Pause):
-            self._pause()
-        elif isinstance(command, Resume):
-            self._resume()
-        elif isinstance(command, Toggle):
-            if self._state is State.PAUSED:
-                self._resume()
-            else:
-                self._pause()
-        elif isinstance(command, Stop):
-            with self._lock:
-                self._frozen = self._position_locked()
-                self._state = State.STOPPED
-        elif isinstance(command, SetRate):
-            self._set_rate(command)
-        elif isinstance(command, Seek):
-            self._seek(command)
-        elif isinstance(command, Step):
-            self._step(command)
-
-    def _set_rate(self, command: SetRate) -> None:
-        if command.steps:
-            rate = next_rate(self._rate, command.steps)
-        else:
-            rate = None if command.rate is None else check_rate(command.rate)
-        with self._lock:
-            position = self._position_locked()
-            self._rate = rate
-            self._set_anchor(position)
-
-    def _seek(self, command: Seek) -> None:
-        with self._lock:
-            here = self._position_locked()
-        target = self.origin + command.to if command.to is not None else here + (command.by or 0.0)
-        upper = self._stop_time if self._end is None else self._end
-        target = min(max(target, self._begin), upper)
-        if target <= self._consumed:
-            # The pass went past entries at or after the target: start a new one.
-            self._open(target)
-        else:
-            self._skip_to(target)
-        self._heartbeat = None  # GotoTime resets the choke state (§8.4)
-        self._out.new_tick()
-        with self._lock:
-            if self._state is State.WAITING:
-                self._state = State.PLAYING
-            self._set_anchor(target)
-
-    def _step(self, command: Step) -> None:
-        self._pause()
-        with self._lock:
-            position = self._frozen
-        if command.seconds is not None:
-            target = min(position + command.seconds, self._stop_time)
-            while (item := self._next) is not None and item[TIME] <= target:
-                self._step_one(item)
-            position = max(target, self._last)
-        else:
-            left = command.entries
-            while left and (item := self._next) is not None and item[TIME] <= self._stop_time:
-                left -= self._step_one(item)
-            position = max(position, self._last)
-        with self._lock:
-            self._frozen = position
-            self._last = position
-
-    def _step_one(self, item: Item) -> int:
-        """Publish (or filter out) one entry while stepping; return 1 if it was published."""
-        if not self._filter.allows(item[KEY], item[SOURCE]):
-            self._counts[self.vehicles[item[ORIGIN]]].filtered += 1
-            self._advance()
-            return 0
-        before = self._counts[self.vehicles[item[ORIGIN]]].published
-        self._emit(item, None)
-        return self._counts[self.vehicles[item[ORIGIN]]].published - before
 
     # -- the end
 
