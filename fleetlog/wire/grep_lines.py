@@ -110,6 +110,7 @@ def encode_grep_line(item: GrepHeader | GrepRecord | GrepEnd) -> bytes:
     return dump_json(obj) + b"\n"
 
 
+_new = object.__new__
 _RECORD_SETTERS = tuple(
     GrepRecord.__dict__[name].__set__
     for name in ("offset", "key", "source", "kind", "text", "lineno")
@@ -132,9 +133,18 @@ def _grep_record(obj: list[Any]) -> GrepRecord:
     ) and not _loose_record(offset, key, source, kind, text, lineno):
         msg = "grep reply: an entry is not [time, var, source, kind, text, line]"
         raise FormatError(msg)
-    # A shore reads a record per matching line: set the frozen slots directly, as
-    # wire.message.new_message does, instead of the dataclass's six object.__setattr__.
-    record = object.__new__(GrepRecord)
+    return _new_record(offset, key, source, kind, text, lineno)
+
+
+def _new_record(
+    offset: float, key: str, source: str, kind: str, text: str, lineno: int
+) -> GrepRecord:
+    """Build a checked record's :class:`GrepRecord`.
+
+    A shore reads a record per matching line: the frozen slots are set directly, as
+    wire.message.new_message does, instead of the dataclass's six object.__setattr__.
+    """
+    record = _new(GrepRecord)
     s_offset, s_key, s_source, s_kind, s_text, s_lineno = _RECORD_SETTERS
     s_offset(record, float(offset))
     s_key(record, key)
@@ -197,19 +207,7 @@ def _records(body: bytes) -> list[GrepHeader | GrepRecord | GrepEnd] | None:
         rows = json.loads(b"[" + body[:-1].replace(b"\n", b",") + b"]")
     except ValueError:  # bytes that are not UTF-8 inside a string
         return None
-    new = object.__new__
-    s_offset, s_key, s_source, s_kind, s_text, s_lineno = _RECORD_SETTERS
-    out: list[GrepHeader | GrepRecord | GrepEnd] = []
-    for offset, key, source, kind, text, lineno in rows:
-        record = new(GrepRecord)
-        s_offset(record, float(offset))
-        s_key(record, key)
-        s_source(record, source)
-        s_kind(record, kind)
-        s_text(record, text)
-        s_lineno(record, lineno)
-        out.append(record)
-    return out
+    return [_new_record(*row) for row in rows]
 
 
 def _decode_lines(data: bytes) -> list[GrepHeader | GrepRecord | GrepEnd]:
