@@ -119,10 +119,13 @@ def test_cut_restore_degrade(tmp_path: Path, cli_env: dict[str, str], profile: P
         assert None not in rtts, f"a command got no answer: {rtts}"
         answered = sorted(r for r in rtts if r is not None)
         # Each command rides the urgent link, ahead of the fetch's ranges: about one round
-        # trip. A lost packet of the command itself costs a TCP retransmission (~0.3-0.6 s),
-        # with or without a fetch (docs/deploy.md, "Slow links"), hence the tail allowance.
+        # trip. A lost packet of the command itself costs a TCP retransmission, with or
+        # without a fetch: up to 1.5 s on this link under load, idle link included
+        # (docs/deploy.md, "Slow links"), and at 5 % loss 2 of ~9 commands hit one in about
+        # a run in five, hence the tail allowance of one retransmission. Behind the fetch's
+        # bytes (the fault this guards against) commands took 2-10 s: the median catches it.
         assert answered[len(answered) // 2] < 0.6, rtts
-        assert sum(r < 1.0 for r in answered) >= 0.8 * len(answered), rtts
+        assert sum(r < 1.7 for r in answered) >= 0.8 * len(answered), rtts
 
         # -- the recording: every counter value, no gap
         linked.link.set(delay=0.0, loss=0.0, rate=0.0)
