@@ -182,19 +182,23 @@ class RecorderProcess:
         extra: Sequence[str] = (),
         tree: Path | None = None,
         env: dict[str, str] | None = None,
+        nice: int | None = None,
     ) -> None:
         """``tree``: run fleetlog from that source tree (``PYTHONPATH``: a before/after pair).
 
         ``env``: more environment variables for the recorder alone (a Zenoh setting such as
-        ``ZENOH_RUNTIME``, measured against the default in the same round).
+        ``ZENOH_RUNTIME``, measured against the default in the same round). ``nice``: run it
+        at that niceness (``nice -n``; below 0 needs root), as a unit's ``Nice=`` would.
         """
         self.workdir = workdir
         more = dict(env or {})
         if tree is not None:
             more["PYTHONPATH"] = str(tree)
         full = {**os.environ, **more} if more else None
+        prefix = ["nice", "-n", str(nice)] if nice is not None else []
         self.proc = subprocess.Popen(
             [
+                *prefix,
                 sys.executable,
                 "-m",
                 "fleetlog",

@@ -19,7 +19,8 @@ Percentiles are over every sample of a run; figures are the median [min–max] o
 
 ``--also TREE`` adds the recorder from another source tree in each round (before/after);
 ``--knob KEY=VALUE`` (repeatable) adds this tree's recorder with those environment variables
-(a Zenoh setting); each round alternates which recorder runs first.
+(a Zenoh setting); ``--nice N`` adds this tree's recorder at niceness N (a unit's ``Nice=``;
+below 0 needs root); each round alternates which recorder runs first.
 """
 
 from __future__ import annotations
@@ -90,9 +91,10 @@ def run_recorder(
     poll: float,
     tree: Path | None = None,
     env: dict[str, str] | None = None,
+    nice: int | None = None,
 ) -> dict[str, float]:
     port = free_port()
-    rec = RecorderProcess(workdir, port, tree=tree, env=env)
+    rec = RecorderProcess(workdir, port, tree=tree, env=env, nice=nice)
     names = {name.encode() for name in key_names(keys)}
     marker = END.encode()
     latencies: list[float] = []
@@ -151,6 +153,9 @@ def main() -> int:
         metavar="KEY=VALUE",
         help="also this tree's recorder with this environment variable, in each round",
     )
+    parser.add_argument(
+        "--nice", type=int, help="also this tree's recorder at this niceness, in each round"
+    )
     args = parser.parse_args()
     knob = parse_env(args.knob)
     rates = [float(r) for r in args.rates.split(",")]
@@ -160,11 +165,14 @@ def main() -> int:
     )
     results: dict[tuple[float, str], list[dict[str, float]]] = {}
     ok = True
-    recorders: list[tuple[str, Path | None, dict[str, str] | None]] = [("rec", None, None)]
+    Recorder = tuple[str, Path | None, dict[str, str] | None, int | None]
+    recorders: list[Recorder] = [("rec", None, None, None)]
     if args.also is not None:
-        recorders.append(("also", args.also, None))
+        recorders.append(("also", args.also, None, None))
     if knob:
-        recorders.append(("knob", None, knob))
+        recorders.append(("knob", None, knob, None))
+    if args.nice is not None:
+        recorders.append(("nice", None, None, args.nice))
     with tempfile.TemporaryDirectory(prefix="fleetlog-lat-") as tmp:
         for r in range(args.rounds):
             for rate in rates:
@@ -173,16 +181,16 @@ def main() -> int:
                 results.setdefault((rate, "bare"), []).append(bare)
                 # The order of the recorders alternates: the first of a round often fares
                 # differently on a shared machine.
-                for who, tree, env in recorders if r % 2 == 0 else recorders[::-1]:
+                for who, tree, env, nice in recorders if r % 2 == 0 else recorders[::-1]:
                     rundir = Path(tmp) / f"r{r}-{int(rate)}-{who}"
                     rundir.mkdir()
                     meter = CpuMeter()
-                    rec = run_recorder(rate, n, args.keys, rundir, args.poll, tree, env)
+                    rec = run_recorder(rate, n, args.keys, rundir, args.poll, tree, env, nice)
                     rec["busy"], rec["steal"] = meter.shares()
                     results.setdefault((rate, who), []).append(rec)
                     if who == "rec" and (rec["missing"] or rec["lost"] or rec["max"] > BOUND * 1e3):
                         ok = False
-                    label = {"rec": "recorder", "also": "--also", "knob": "--knob"}[who]
+                    label = "recorder" if who == "rec" else f"--{who}"
                     head = (
                         f"bare p50 {bare['p50']:.3f} p99 {bare['p99']:.3f} | "
                         if who == "rec"
@@ -205,6 +213,7 @@ def main() -> int:
             ("rec", "recorder"),
             ("also", "--also"),
             ("knob", "--knob"),
+            ("nice", "--nice"),
         ):
             if (rate, who) not in results:
                 continue
@@ -217,7 +226,7 @@ def main() -> int:
             print(f"  {'':8}  recorder/bare {q}: {spread(ratios, '{:.1f}')}×")
         over = spread([x["over"] * 100 for x in rec_rows], "{:.2f}")
         print(f"  {'':8}  recorder lines over 20 ms: {over} %")
-        for who in ("also", "knob"):
+        for who in ("also", "knob", "nice"):
             if (rate, who) in results:
                 others = results[(rate, who)]
                 ratios = [b["p99"] / a["p99"] for a, b in zip(rec_rows, others, strict=True)]
@@ -227,6 +236,8 @@ def main() -> int:
         print(f"  --also: {args.also}")
     if knob:
         print(f"  --knob: {' '.join(args.knob)}")
+    if args.nice is not None:
+        print(f"  --nice: {args.nice}")
     print(f"every line flushed within 20 ms of publishing: {'yes' if ok else 'NO'}", end="")
     print(f" (worst {worst:.2f} ms)")
     return 0 if ok else 1
