@@ -261,8 +261,10 @@ def test_message_text_splits_each_source_and_escapes_every_string() -> None:
         "binary": pl.Binary,
     }
     whole = pl.DataFrame(rows, schema=schema)
-    for frame in (whole, whole.filter(pl.col("type") != "binary"), whole.head(1)):
-        got = _messages(frame, pl.lit(0, pl.UInt16))["data"].to_list()
+    finite = whole.filter(pl.col("double").is_finite() | pl.col("double").is_null())
+    for frame in (whole, whole.filter(pl.col("type") != "binary"), whole.head(1), finite):
+        frame = frame.with_columns(channel=pl.lit(0, pl.UInt16))
+        got = _messages(frame)["data"].to_list()
         assert len(got) == frame.height
         for text, row in zip(got, frame.iter_rows(named=True), strict=True):
             message = json.loads(text)
