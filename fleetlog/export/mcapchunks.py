@@ -9,8 +9,9 @@ Two ways to assemble, giving the same bytes (a test holds it):
 
 * with numpy (an optional accelerator): headers written as one structured array, each
   joined to its message's data by polars (a Binary ``+``), and the records laid end to end
-  by exploding them as lists of bytes (copies in Rust, not masked numpy assignments); the
-  indexes are a stable argsort of each chunk's channels. No Python object per message.
+  by exploding them as lists of bytes (copies in Rust, not masked numpy assignments), one
+  chunk at a time as the writer takes them (still in the cache when it compresses them);
+  the indexes are a stable argsort of each chunk's channels. No Python object per message.
 * without it: the headers packed by one precompiled :class:`struct.Struct` mapped over the
   batch and joined with the data (a loop in C, still a few Python objects per message).
 
