@@ -106,17 +106,26 @@ def main() -> None:
     )
     base = logstart_ns(source.logstart or 0.0)
     log_time = (pl.col("offset") * 1e9).round().cast(pl.Int64, strict=False) + base
-    nav_rows = pl.col("variable").is_in(list(NAV_VARS)) & (pl.col("type") == "double")
-    timed = stage(
-        "mcap: log times, names, position rows",
-        lambda: [
-            (t, t["variable"].unique().sort().to_list(), t.filter(nav_rows))
-            for t in (_timed(f.with_columns(log_time=log_time)) for f in whole)
-        ],
-    )
-    names = sorted({n for _, found, _ in timed for n in found})
-    channel = _channel_ids({n: i for i, n in enumerate(names)})
-    texts = stage("mcap: JSON text (values)", lambda: [_messages(t, channel) for t, _, _ in timed])
+    names = sorted({n for f in whole for n in f["variable"].unique().to_list()})
+    ids = {n: i for i, n in enumerate(names)}
+    navs = [ids[n] for n in names if n in NAV_VARS]
+
+    def names_rows() -> list[tuple[pl.DataFrame, pl.DataFrame]]:
+        out = []
+        for f in whole:
+            t = _timed(f.with_columns(log_time=log_time))
+            t["variable"].unique().sort().to_list()  # the channels the batch declares
+            t = t.with_columns(_channel_ids(ids).alias("channel"))
+            nav = (
+                t.select("channel", "log_time", "variable", "type", "double")
+                .filter(pl.col("channel").is_in(navs))
+                .filter(pl.col("type") == "double")
+            )
+            out.append((t, nav))
+        return out
+
+    timed = stage("mcap: log times, channels, position rows", names_rows)
+    texts = stage("mcap: JSON text (values)", lambda: [_messages(t) for t, _ in timed])
     chunks = stage(
         "mcap: records, indexes (values)",
         lambda: [c for b in texts for c in build_chunks(b, 0, 1 << 20, np)],
@@ -126,7 +135,7 @@ def main() -> None:
         "mcap: zstd, crc32 (values)",
         lambda: [(zstd.compress(c.records), zlib.crc32(c.records)) for c in chunks],
     )
-    nav = pl.concat([n.select("log_time", "variable", "double") for _, _, n in timed])
+    nav = pl.concat([n.select("log_time", "variable", "double") for _, n in timed])
     nav = nav.with_columns(pl.col("log_time").cast(pl.UInt64))
 
     def pose_text() -> pl.DataFrame:

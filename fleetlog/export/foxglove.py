@@ -136,15 +136,20 @@ def schema_bytes(schema: Mapping[str, object]) -> bytes:
     return json.dumps(schema, separators=(",", ":")).encode()
 
 
-def _wide(nav: pl.DataFrame, needed: tuple[str, ...], optional: tuple[str, ...]) -> pl.DataFrame:
-    """One row per time any of the variables was posted, with the latest of each."""
+def _wide(
+    nav: pl.DataFrame, needed: tuple[str, ...], optional: tuple[str, ...]
+) -> tuple[pl.DataFrame, set[str]]:
+    """One row per time any of the variables was posted, with the latest of each.
+
+    Also the variables that were posted (an optional one that was not is 0.0 throughout).
+    """
     import polars as pl
 
     wanted = [*needed, *optional]
     rows = nav.filter(pl.col("variable").is_in(wanted))
     present = set(rows["variable"].unique().to_list())
     if not set(needed) <= present:
-        return pl.DataFrame()
+        return pl.DataFrame(), present
     if not rows["log_time"].is_sorted():
         rows = rows.sort("log_time", maintain_order=True)  # file order among equal times
     # Each row carries the latest value of every variable so far (a forward fill); the last
@@ -169,14 +174,24 @@ def _wide(nav: pl.DataFrame, needed: tuple[str, ...], optional: tuple[str, ...])
     wide = wide.drop_nulls(list(needed))
     if optional:
         wide = wide.with_columns(pl.col(list(optional)).fill_null(0.0))
-    return wide
+    return wide, present
 
 
-def _num(name: str | pl.Expr) -> pl.Expr:
-    """A double as JSON text: what ``json_encode`` writes (shortest form; null unless finite)."""
+def _finite(wide: pl.DataFrame, *names: str) -> bool:
+    """Whether every value of these columns is finite (then no null is written for one)."""
+    return all(bool(wide[name].is_finite().all()) for name in names)
+
+
+def _num(name: str | pl.Expr, *, finite: bool = False) -> pl.Expr:
+    """A double as JSON text: what ``json_encode`` writes (shortest form; null unless finite).
+
+    ``finite``: the values are known to be finite, so the text is the cast alone.
+    """
     import polars as pl
 
     value = pl.col(name) if isinstance(name, str) else name
+    if finite:
+        return value.cast(pl.String)
     return pl.when(value.is_finite()).then(value.cast(pl.String)).otherwise(pl.lit("null"))
 
 
@@ -214,7 +229,8 @@ def _json(pieces: list[pl.Expr | str]) -> pl.Expr:
 
 def locations(nav: pl.DataFrame, vehicle: str) -> Derived:
     """``foxglove.LocationFix`` messages from NAV_LAT/NAV_LONG."""
-    wide = _wide(nav, LOCATION_VARS, ())
+    wide, _ = _wide(nav, LOCATION_VARS, ())
+    finite = _finite(wide, *LOCATION_VARS) if wide.height else False
     return Derived(
         wide,
         _json(
@@ -222,9 +238,9 @@ def locations(nav: pl.DataFrame, vehicle: str) -> Derived:
                 "{",
                 *_stamp(),
                 f',"frame_id":{_text(vehicle)},"latitude":',
-                _num("NAV_LAT"),
+                _num("NAV_LAT", finite=finite),
                 ',"longitude":',
-                _num("NAV_LONG"),
+                _num("NAV_LONG", finite=finite),
                 ',"altitude":0.0,"position_covariance":[' + ",".join(["0.0"] * 9) + "]"
                 ',"position_covariance_type":0}',
             ]
@@ -236,7 +252,10 @@ def poses(nav: pl.DataFrame) -> Derived:
     """``foxglove.PoseInFrame`` messages from NAV_X/Y/HEADING (and NAV_Z)."""
     import polars as pl
 
-    wide = _wide(nav, POSE_VARS, ("NAV_Z",))
+    wide, present = _wide(nav, POSE_VARS, ("NAV_Z",))
+    # Known finite columns need no null test; a NAV_Z never posted is 0.0 in every message.
+    finite = {name: wide.height > 0 and _finite(wide, name) for name in (*POSE_VARS, "NAV_Z")}
+    z: pl.Expr | str = _num("NAV_Z", finite=finite["NAV_Z"]) if "NAV_Z" in present else "0.0"
     half_yaw = (90.0 - pl.col("NAV_HEADING")) * (math.pi / 360.0)
     return Derived(
         wide,
@@ -245,15 +264,16 @@ def poses(nav: pl.DataFrame) -> Derived:
                 "{",
                 *_stamp(),
                 f',"frame_id":{_text(POSE_FRAME)},"pose":{{"position":{{"x":',
-                _num("NAV_X"),
+                _num("NAV_X", finite=finite["NAV_X"]),
                 ',"y":',
-                _num("NAV_Y"),
+                _num("NAV_Y", finite=finite["NAV_Y"]),
                 ',"z":',
-                _num("NAV_Z"),
+                z,
                 '},"orientation":{"x":0.0,"y":0.0,"z":',
-                _num(half_yaw.sin()),
+                # (the sine and cosine of a finite angle are finite)
+                _num(half_yaw.sin(), finite=finite["NAV_HEADING"]),
                 ',"w":',
-                _num(half_yaw.cos()),
+                _num(half_yaw.cos(), finite=finite["NAV_HEADING"]),
                 "}}}",
             ]
         ),

@@ -9,8 +9,9 @@ Two ways to assemble, giving the same bytes (a test holds it):
 
 * with numpy (an optional accelerator): headers written as one structured array, each
   joined to its message's data by polars (a Binary ``+``), and the records laid end to end
-  by exploding them as lists of bytes (copies in Rust, not masked numpy assignments); the
-  indexes are a stable argsort of each chunk's channels. No Python object per message.
+  by exploding them as lists of bytes (copies in Rust, not masked numpy assignments), one
+  chunk at a time as the writer takes them (still in the cache when it compresses them);
+  the indexes are a stable argsort of each chunk's channels. No Python object per message.
 * without it: the headers packed by one precompiled :class:`struct.Struct` mapped over the
   batch and joined with the data (a loop in C, still a few Python objects per message).
 
@@ -22,6 +23,7 @@ from __future__ import annotations
 
 import functools
 import struct
+from collections.abc import Iterator
 from dataclasses import dataclass
 from itertools import chain, pairwise, repeat
 from typing import TYPE_CHECKING, Any
@@ -78,8 +80,8 @@ def _prepared(batch: pl.DataFrame) -> pl.DataFrame:
     return frame
 
 
-def build_chunks(batch: pl.DataFrame, first: int, chunk_size: int, numpy: Any) -> list[Chunk]:
-    """The batch's messages as chunks (``numpy`` the module, or None for the pure path).
+def build_chunks(batch: pl.DataFrame, first: int, chunk_size: int, numpy: Any) -> Iterator[Chunk]:
+    """The batch's messages as chunks, one at a time (``numpy`` the module, or None).
 
     Args:
         batch: columns ``channel`` (UInt16), ``log_time`` (UInt64 ns), ``data`` (String or
@@ -92,7 +94,7 @@ def build_chunks(batch: pl.DataFrame, first: int, chunk_size: int, numpy: Any) -
     frame = _prepared(batch)
     if numpy is not None and _casts_bytes():
         return _with_numpy(frame, first, chunk_size, numpy)
-    return _pure(frame, first, chunk_size)
+    return iter(_pure(frame, first, chunk_size))
 
 
 @functools.cache
@@ -107,19 +109,25 @@ def _casts_bytes() -> bool:
     return True
 
 
-def _records(data: pl.Series, heads: Any, np: Any) -> Any:
-    """Every header followed by its message's data, end to end, as one numpy byte array."""
+def _heads(heads: Any, np: Any) -> pl.Series:
+    """The headers (a numpy structured array) as a Binary column."""
     import polars as pl
 
     fixed = pl.Series(heads.view(np.uint8).reshape(len(heads), _RECORD_FIXED))
-    # One chunk (cheap for views), so that the exploded bytes are the list's own buffer:
-    # a batch's text often comes in two, and exploding those copied every byte once more.
-    records = fixed.cast(pl.List(pl.UInt8)).cast(pl.Binary) + data.rechunk()
+    return fixed.cast(pl.List(pl.UInt8)).cast(pl.Binary)
+
+
+def _records(data: pl.Series, fixed: pl.Series) -> Any:
+    """Every header followed by its message's data, end to end, as one numpy byte array."""
+    import polars as pl
+
+    # One chunk (cheap for views), so that the exploded bytes are the list's own buffer.
+    records = fixed + data.rechunk()
     # A record is never empty (its header), so the exploded bytes are all of them, in order.
     return records.cast(pl.List(pl.UInt8)).explode().to_numpy()
 
 
-def _with_numpy(frame: pl.DataFrame, first: int, chunk_size: int, np: Any) -> list[Chunk]:
+def _with_numpy(frame: pl.DataFrame, first: int, chunk_size: int, np: Any) -> Iterator[Chunk]:
     n = frame.height
     data = frame["data"]
     size = data.bin.size().to_numpy().astype(np.int64) + _RECORD_FIXED
@@ -133,13 +141,14 @@ def _with_numpy(frame: pl.DataFrame, first: int, chunk_size: int, np: Any) -> li
     heads["sequence"] = np.arange(first, first + n, dtype="<u8") & 0xFFFFFFFF
     heads["log_time"] = times
     heads["publish_time"] = times
-    out = _records(data, heads, np)
+    fixed = _heads(heads, np)
     part = at // chunk_size
     bounds = [0, *(np.flatnonzero(part[1:] != part[:-1]) + 1).tolist(), n]
-    chunks = []
     for lo, hi in pairwise(bounds):
+        # Each chunk's records are made when it is wanted (about 1 MiB, still in the cache
+        # when the caller compresses and checksums them), not the whole batch's at once.
+        out = _records(data.slice(lo, hi - lo), fixed.slice(lo, hi - lo))
         begin = int(at[lo])
-        stop = int(at[hi - 1] + size[hi - 1])
         mine = channels[lo:hi]
         order = np.argsort(mine, kind="stable")
         pairs = np.empty((hi - lo, 2), dtype="<u8")
@@ -151,16 +160,7 @@ def _with_numpy(frame: pl.DataFrame, first: int, chunk_size: int, np: Any) -> li
         for cid, i, k in zip(cids.tolist(), starts.tolist(), counts.tolist(), strict=True):
             indexes[cid] = message_index(cid, pairs[i : i + k].tobytes())
             per_channel[cid] = k
-        chunks.append(
-            Chunk(
-                int(times[lo]),
-                int(times[hi - 1]),
-                memoryview(out[begin:stop]),
-                indexes,
-                per_channel,
-            )
-        )
-    return chunks
+        yield Chunk(int(times[lo]), int(times[hi - 1]), memoryview(out), indexes, per_channel)
 
 
 def _pure(frame: pl.DataFrame, first: int, chunk_size: int) -> list[Chunk]:

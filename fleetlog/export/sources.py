@@ -22,8 +22,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from fleetlog.errors import StorageError, UsageError
-from fleetlog.storage.alogscan import read_head
-from fleetlog.tools.inputs import open_log
+from fleetlog.tools.inputs import open_log_head
 
 __all__ = ["Resolved", "Source", "resolve"]
 
@@ -92,8 +91,7 @@ def _root_name(path: Path) -> str:
 
 
 def _session(directory: Path, vehicle: str) -> Source:
-    log = open_log(directory, vehicle)
-    head = read_head(log.path)
+    log, head = open_log_head(directory, vehicle)  # the head is read once
     return Source(
         log.vehicle, directory.name, log.path, head.banner.logstart if head.banner else None
     )
@@ -121,8 +119,7 @@ def _vehicle_dir(directory: Path, vehicle: str, out: Resolved, budget: list[int]
 def _add(spec: str | os.PathLike[str], out: Resolved) -> None:
     path = Path(spec)
     if path.is_file():
-        log = open_log(path)
-        head = read_head(path)
+        log, head = open_log_head(path)
         out.sources.append(
             Source(
                 log.vehicle,

@@ -103,21 +103,38 @@ def _rests(sources: pl.Series) -> pl.Series:
     return names.select(pl.concat_str(pl.lit(","), encoded)).to_series()
 
 
-def _json(sources: pl.Series, *, binary: bool = True) -> pl.Expr:
+def _string_text(value: pl.Expr) -> pl.Expr:
+    """A string as JSON text (``null`` for a null), as polars' ``json_encode`` writes it."""
+    import polars as pl
+
+    return pl.struct(value.alias("v")).struct.json_encode().str.slice(5).str.head(-1)
+
+
+def _json(
+    sources: pl.Series,
+    *,
+    binary: bool = True,
+    finite: bool = False,
+    text: pl.Expr | None = None,
+) -> pl.Expr:
     """The message text of each row (``{value, source, aux, community}``).
 
     ``source`` is the column as written; ``sources`` its distinct values (a log has a few),
     each split and written once, then looked up by row. ``binary``: the rows may hold binary
-    values (written in base64).
+    values (written in base64). ``finite``: every double is finite (no NaN or infinity to
+    write as null), so a double's text is its cast alone. ``text``: the column ``string`` as
+    JSON text, if it was made already.
     """
     import polars as pl
 
     col = pl.col
-    text = pl.struct(col("string").alias("v")).struct.json_encode().str.slice(5).str.head(-1)
+    if text is None:
+        text = _string_text(col("string"))
     # Each branch is null where it does not apply: a double's text where it is finite, a
     # binary's base64 (or null); then a string's text, which is "null" for a double (its
     # ``string`` is null) and a binary's reference (its branch comes first).
-    branches = [pl.when(col("double").is_finite()).then(col("double").cast(pl.String))]
+    double = col("double").cast(pl.String)
+    branches = [double if finite else pl.when(col("double").is_finite()).then(double)]
     if binary:
         encoded = pl.concat_str(pl.lit('"'), col("binary").bin.encode("base64"), pl.lit('"'))
         branches.append(
@@ -132,12 +149,27 @@ def _json(sources: pl.Series, *, binary: bool = True) -> pl.Expr:
     return pl.concat_str(pl.lit('{"value":'), pl.coalesce(*branches, text), rest)
 
 
-def _messages(frame: pl.DataFrame, channel: pl.Expr) -> pl.DataFrame:
-    """The batch of messages of a frame of entries (made by a worker of the writer)."""
+def _messages(frame: pl.DataFrame) -> pl.DataFrame:
+    """The batch of messages of a frame of entries with their ``channel`` (made by a worker)."""
     import polars as pl
 
-    data = _json(frame["source"].unique(), binary=bool(frame["type"].eq("binary").any()))
-    return frame.select(channel.alias("channel"), pl.col("log_time"), data.alias("data"))
+    # The strings' JSON text, made for the rows that have one only (most rows are doubles,
+    # whose ``string`` is null: their text is "null", which only a NaN or infinity uses).
+    strings = frame["string"]
+    if strings.null_count():
+        has = strings.is_not_null()
+        encoded = frame.select(_string_text(pl.col("string").filter(has))).to_series()
+        text = pl.repeat("null", frame.height, dtype=pl.String, eager=True)
+        frame = frame.with_columns(text.scatter(has.arg_true(), encoded).alias("string_json"))
+    else:
+        frame = frame.with_columns(_string_text(pl.col("string")).alias("string_json"))
+    data = _json(
+        frame["source"].unique(),
+        binary=bool(frame["type"].eq("binary").any()),
+        finite=bool(frame["double"].is_finite().all()),  # nulls (not doubles) are ignored
+        text=pl.col("string_json"),
+    )
+    return frame.select("channel", pl.col("log_time"), data.alias("data"))
 
 
 class _Channels:
@@ -211,14 +243,18 @@ def export_mcap(
                 result.untimed += frame.height - timed.height
                 if not timed.height:
                     continue
-                ids = channels.of(
-                    source.vehicle, source.session, timed["variable"].unique().sort().to_list()
-                )
+                names = timed["variable"].unique().sort().to_list()
+                ids = channels.of(source.vehicle, source.session, names)
+                # Each row's channel, found once: the position rows are picked by it too.
+                timed = timed.with_columns(_channel_ids(ids).alias("channel"))
                 # The JSON text is made by the writer's worker while this thread reads on.
-                writer.write_lazy(partial(_messages, timed, _channel_ids(ids)), timed.height)
-                if positions:
-                    wanted = timed.filter(
-                        pl.col("variable").is_in(list(NAV_VARS)) & (pl.col("type") == "double")
+                writer.write_lazy(partial(_messages, timed), timed.height)
+                navs = [ids[name] for name in names if name in NAV_VARS]
+                if positions and navs:
+                    wanted = (
+                        timed.select("channel", "log_time", "variable", "type", "double")
+                        .filter(pl.col("channel").is_in(navs))
+                        .filter(pl.col("type") == "double")
                     )
                     if wanted.height:
                         nav.setdefault(source.vehicle, []).append(

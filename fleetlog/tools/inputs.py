@@ -7,10 +7,10 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from fleetlog.errors import StorageError
-from fleetlog.storage.alogscan import read_head
+from fleetlog.storage.alogscan import HeadInfo, read_head
 from fleetlog.storage.columnar import AlogReader, Errors, find_alog
 
-__all__ = ["LogInput", "open_log"]
+__all__ = ["LogInput", "open_log", "open_log_head"]
 
 _SUFFIXES = (".alog.zst", ".alog.gz", ".alog", ".xlog.zst", ".xlog.gz", ".xlog")
 
@@ -55,6 +55,17 @@ def open_log(spec: str | os.PathLike[str], vehicle: str | None = None) -> LogInp
     Raises:
         StorageError: no such file or directory, or a directory without one alog.
     """
+    return open_log_head(spec, vehicle)[0]
+
+
+def open_log_head(
+    spec: str | os.PathLike[str], vehicle: str | None = None
+) -> tuple[LogInput, HeadInfo]:
+    """:func:`open_log`, and the head it read (its banner), for a caller that needs both.
+
+    Raises:
+        StorageError: no such file or directory, or a directory without one alog.
+    """
     path = Path(spec)
     if path.is_dir():
         path = find_alog(path)
@@ -62,9 +73,10 @@ def open_log(spec: str | os.PathLike[str], vehicle: str | None = None) -> LogInp
         msg = f"{spec}: no such alog or session directory"
         raise StorageError(msg)
     head = read_head(path)
-    return LogInput(
+    log = LogInput(
         os.fspath(spec),
         path,
         vehicle or head.community or _root_name(path),
         head.time_decimals if head.time_decimals is not None else 5,
     )
+    return log, head

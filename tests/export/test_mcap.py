@@ -261,8 +261,10 @@ def test_message_text_splits_each_source_and_escapes_every_string() -> None:
         "binary": pl.Binary,
     }
     whole = pl.DataFrame(rows, schema=schema)
-    for frame in (whole, whole.filter(pl.col("type") != "binary"), whole.head(1)):
-        got = _messages(frame, pl.lit(0, pl.UInt16))["data"].to_list()
+    finite = whole.filter(pl.col("double").is_finite() | pl.col("double").is_null())
+    for frame in (whole, whole.filter(pl.col("type") != "binary"), whole.head(1), finite):
+        frame = frame.with_columns(channel=pl.lit(0, pl.UInt16))
+        got = _messages(frame)["data"].to_list()
         assert len(got) == frame.height
         for text, row in zip(got, frame.iter_rows(named=True), strict=True):
             message = json.loads(text)
@@ -322,11 +324,17 @@ def test_derived_json_text_is_what_json_encode_writes() -> None:
         position_covariance=pl.lit(pl.Series([[0.0] * 9])),
         position_covariance_type=pl.lit(0),
     ).struct.json_encode()
-    for derived, oracle in ((poses(nav), oracle_pose), (locations(nav, vehicle), oracle_fix)):
-        assert derived.rows.height > 300
-        got = derived.frame()["data"].to_list()
-        assert got == derived.rows.select(oracle).to_series().to_list()
-        assert all(isinstance(json.loads(text), dict) for text in got)
+    # also: no NAV_Z (z is 0.0 throughout), and only finite values (no null test)
+    no_z = nav.filter(pl.col("variable") != "NAV_Z")
+    for rows in (nav, no_z, nav.filter(pl.col("double").is_finite())):
+        for derived, oracle in (
+            (poses(rows), oracle_pose),
+            (locations(rows, vehicle), oracle_fix),
+        ):
+            assert derived.rows.height > 200
+            got = derived.frame()["data"].to_list()
+            assert got == derived.rows.select(oracle).to_series().to_list()
+            assert all(isinstance(json.loads(text), dict) for text in got)
 
 
 def test_derived_rows_are_the_latest_values_at_each_time() -> None:
@@ -347,7 +355,7 @@ def test_derived_rows_are_the_latest_values_at_each_time() -> None:
             orient="row",
         )
         for needed, optional in ((("NAV_X", "NAV_Y", "NAV_HEADING"), ("NAV_Z",)), (("NAV_X",), ())):
-            got = _wide(nav, needed, optional)
+            got, _ = _wide(nav, needed, optional)
             present = set(nav["variable"].to_list())
             if not set(needed) <= present:
                 assert got.height == 0
