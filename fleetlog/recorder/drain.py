@@ -55,6 +55,11 @@ _POLL = 0.001
 #: stream keeps it polling, which batches samples per pass (one write per batch), and a
 #: handover to a watcher thread costs a few thread switches
 _SPIN = 4
+#: the same after a sample woke the sleeping thread: whatever woke it came more than the
+#: polls' span after the sample before, so a stream that slow gains nothing from them (an
+#: idle recorder's own PLOGGER_STATUS cost four wake-ups each); one poll still batches a
+#: publisher's burst, and a poll that finds samples makes it poll ``_SPIN`` times again
+_SPIN_AFTER_SLEEP = 1
 #: the longest the drain thread sleeps with nothing to do: the session directory's removal
 #: is noticed within it (and systemd's watchdog is fed at a third of WatchdogSec if less)
 _MAX_SLEEP = 1.0
@@ -394,6 +399,7 @@ class Drain:
         sleep = time.sleep
         next_tick = 0.0
         idle = 0
+        spin = _SPIN
         stop = self._stop
         commands = recorder.commands
         watchdog = self._watchdog
@@ -405,7 +411,16 @@ class Drain:
                 commands.run_queued()
             if not got:
                 self._drained_at = now
-            if now >= next_tick or idle > _SPIN:
+            if got or commands.pending:
+                if got and 0 < idle <= spin:
+                    spin = _SPIN  # a poll found samples: a stream, keep polling
+                idle = 0
+            else:
+                idle += 1
+            # Past its polls the thread runs the timers before it sleeps, so that it does
+            # not wake again at once for what a pass just made due (an fsync, metadata).
+            resting = idle > spin
+            if now >= next_tick or resting:
                 next_tick = now + _TICK
                 # Heartbeats read now are trusted once the FIFOs were seen empty after this.
                 self._read_beats()
@@ -413,12 +428,11 @@ class Drain:
                 recorder.tick()
                 if watchdog is not None:
                     watchdog(now)
-            if got or commands.pending:
-                idle = 0
-            else:
-                idle += 1
-                if idle <= _SPIN:
-                    # Samples that come meanwhile wait for the next pass at most this long.
-                    sleep(_POLL)
-                elif not stop.is_set():
-                    self._sleep()
+            if not idle:
+                continue
+            if not resting:
+                # Samples that come meanwhile wait for the next pass at most this long.
+                sleep(_POLL)
+            elif not stop.is_set():
+                self._sleep()
+                spin = _SPIN_AFTER_SLEEP
