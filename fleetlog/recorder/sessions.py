@@ -43,6 +43,10 @@ __all__ = ["MIN_FREE_BYTES", "Background", "Health", "MetaState", "SessionKeepin
 
 #: the session metadata is rewritten at most this often while counters change
 META_INTERVAL = 2.0
+#: ... or up to this much sooner when the drain thread is awake for other work anyway: an
+#: idle recorder's own PLOGGER_STATUS changes the counters every 2 s, and without this slack
+#: the rewrite drifted a few ms away from the tick that logs that line, a wake-up of its own
+META_EARLY = 0.25
 #: losses that did not break the session (DROP publishers', unreadable keys) are marked in
 #: the alog at most this often
 GAP_INTERVAL = 1.0
@@ -599,10 +603,12 @@ class SessionKeeping:
                 and (self._h.unsynced or session.unit_due() is not None)
             ):
                 self._sync(now)
-        if now - self._m.meta_at >= META_INTERVAL and self._m.meta is not None:
-            self._m.meta_at = now
-            if self._session_counters() != self._m.meta_counters:
-                self._update_meta(now)
+        if (
+            self._m.meta is not None
+            and now - self._m.meta_at >= META_INTERVAL - META_EARLY
+            and self._session_counters() != self._m.meta_counters
+        ):
+            self._update_meta(now)
 
     def _session_due(self, now: float) -> float:
         """Return when :meth:`_session_tick` next has work (epoch; a second away at most)."""
@@ -618,7 +624,7 @@ class SessionKeeping:
         unit = session.unit_due()
         if unit is not None:
             due = min(due, unit)
-        if self._m.meta is not None:
+        if self._m.meta is not None and self._session_counters() != self._m.meta_counters:
             due = min(due, self._m.meta_at + META_INTERVAL)
         return due
 
