@@ -19,6 +19,7 @@ writes of the background writer.
 
 from __future__ import annotations
 
+import math
 import os
 import threading
 from collections.abc import Iterable
@@ -141,8 +142,9 @@ class DiskGuard:
     """The guard's and retention's state (one object on the Recorder)."""
 
     settings: DiskSettings
-    #: when the free space is checked next, and what it was
+    #: when the free space is checked next, when it was last, and what it was
     check_at: float = 0.0
+    checked_at: float = 0.0
     free: int | None = None
     #: writing stopped by the guard (the reason shown), and how often it stopped
     stopped: str | None = None
@@ -198,6 +200,7 @@ class DiskKeeping(ModeKeeping):
         guard = self._disk
         if now < guard.check_at:
             return
+        guard.checked_at = now
         free = guard.free = free_bytes(self.log_root)
         low = guard.settings.min_free
         near = free is not None and low and free < 2 * guard.resume
@@ -212,6 +215,21 @@ class DiskKeeping(ModeKeeping):
             guard.stopped = None
         if guard.settings.retention and now >= guard.retain_at:
             self.retain(now)
+
+    def _disk_due(self) -> float:
+        """Return when :meth:`_disk_tick` next has work (epoch; inf: nothing timed).
+
+        The guard's check once a second (at every tick as well once near the bound), and
+        retention's next pass; without either, the free space is only reported, and read at
+        whatever tick comes.
+        """
+        guard = self._disk
+        due = math.inf
+        if guard.settings.min_free:
+            due = guard.checked_at + CHECK_INTERVAL
+        if guard.settings.retention and guard.policies():
+            due = min(due, guard.retain_at)
+        return due
 
     def _disk_stop(self, now: float, free: int) -> None:
         guard = self._disk

@@ -60,9 +60,10 @@ _SPIN = 4
 #: idle recorder's own PLOGGER_STATUS cost four wake-ups each); one poll still batches a
 #: publisher's burst, and a poll that finds samples makes it poll ``_SPIN`` times again
 _SPIN_AFTER_SLEEP = 1
-#: the longest the drain thread sleeps with nothing to do: the session directory's removal
-#: is noticed within it (and systemd's watchdog is fed at a third of WatchdogSec if less)
-_MAX_SLEEP = 1.0
+#: the longest the drain thread sleeps with nothing to do, whatever the engine says
+#: (:meth:`Recorder.due_in`: its next PLOGGER_STATUS is 2 s away at most); systemd's
+#: watchdog is fed at a third of WatchdogSec if that is less
+_MAX_SLEEP = 2.0
 
 
 class Fifo(Protocol):
@@ -332,7 +333,8 @@ class Drain:
         """Sleep until a sample, a command, stop or the recorder's next timer."""
         for inbox in self.inboxes:
             inbox.lend()
-        timeout = min(self._max_sleep, max(0.001, self.recorder.due_in()))
+        timeout = min(self._max_sleep, self.recorder.due_in(), self.misses.due_in())
+        timeout = max(0.001, timeout)
         self.sleeps += 1
         self.wake.wait(timeout)
 

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import math
 import os
 import time
 import uuid
@@ -611,12 +612,15 @@ class SessionKeeping:
             self._update_meta(now)
 
     def _session_due(self, now: float) -> float:
-        """Return when :meth:`_session_tick` next has work (epoch; a second away at most)."""
+        """Return when :meth:`_session_tick` next has work (epoch; inf: nothing timed).
+
+        The directory's removal is checked at every tick, which comes at least every 2 s
+        (PLOGGER_STATUS), and at every flush.
+        """
         session = self.session
         if session is None:
-            return self._h.retry_at if self._h.broken is not None else now + 1.0
-        # The directory's removal is checked at least once a second.
-        due = now + 1.0
+            return self._h.retry_at if self._h.broken is not None else math.inf
+        due = math.inf
         if self.losses:
             due = min(due, self._h.gaps_at + GAP_INTERVAL)
         if self.config.fsync_interval > 0 and self._h.unsynced:
