@@ -20,6 +20,7 @@ import contextlib
 import dataclasses
 import math
 import os
+import threading
 import time
 import uuid
 from collections.abc import Callable
@@ -115,6 +116,8 @@ class MetaState:
     meta_counters: dict[str, int] = field(default_factory=dict)
     #: sessions found cut at start, marked by the first session's first entries
     cut_sessions: list[SessionMeta] = field(default_factory=list)
+    #: set whenever a session opens or closes (a log server's warmer waits on it)
+    changed: threading.Event = field(default_factory=threading.Event)
 
 
 class SessionKeeping:
@@ -179,6 +182,11 @@ class SessionKeeping:
     def meta(self) -> SessionMeta | None:
         """The open session's metadata."""
         return self._m.meta
+
+    @property
+    def session_changes(self) -> threading.Event:
+        """Set whenever a session opens or closes (never cleared here: the waiter clears it)."""
+        return self._m.changed
 
     @property
     def cut_sessions(self) -> list[SessionMeta]:
@@ -248,6 +256,7 @@ class SessionKeeping:
             layout = dataclasses.replace(layout, path=path)
         session = SessionWriter.open(layout, self.logstart, when=now, cwd=self._cwd)
         self.session = session
+        self._m.changed.set()
         self._h.in_fallback = path is not None
         self._unflushed_since = None
         self.stats.sessions += 1
@@ -342,6 +351,7 @@ class SessionKeeping:
 
     def _finish(self, session: SessionWriter) -> None:
         """Sync a closed session's files and write its last metadata, off this thread."""
+        self._m.changed.set()
         meta = self._m.meta
         self._m.meta = None
         final = None
