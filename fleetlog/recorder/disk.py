@@ -196,10 +196,19 @@ class DiskKeeping(ModeKeeping):
         return self._disk.stopped
 
     def _disk_tick(self, now: float) -> None:
-        """Check the free space once a second; stop writing below MinFreeDisk; retain."""
+        """Check the free space once a second; stop writing below MinFreeDisk; retain.
+
+        Without MinFreeDisk nothing depends on the free space: it is read when the status
+        asks for it (:meth:`disk_status`), not every second.
+        """
         guard = self._disk
-        if now < guard.check_at:
-            return
+        if guard.settings.min_free and now >= guard.check_at:
+            self._guard_check(now)
+        if guard.settings.retention and now >= guard.retain_at:
+            self.retain(now)
+
+    def _guard_check(self, now: float) -> None:
+        guard = self._disk
         guard.checked_at = now
         free = guard.free = free_bytes(self.log_root)
         low = guard.settings.min_free
@@ -213,15 +222,12 @@ class DiskKeeping(ModeKeeping):
                 self._disk_stop(now, free)
         elif guard.stopped is not None and free is not None and free >= guard.resume:
             guard.stopped = None
-        if guard.settings.retention and now >= guard.retain_at:
-            self.retain(now)
 
     def _disk_due(self) -> float:
         """Return when :meth:`_disk_tick` next has work (epoch; inf: nothing timed).
 
         The guard's check once a second (at every tick as well once near the bound), and
-        retention's next pass; without either, the free space is only reported, and read at
-        whatever tick comes.
+        retention's next pass.
         """
         guard = self._disk
         due = math.inf
@@ -332,7 +338,7 @@ class DiskKeeping(ModeKeeping):
         guard = self._disk
         settings = guard.settings
         return {
-            "free": guard.free,
+            "free": guard.free if settings.min_free else free_bytes(self.log_root),
             "min_free": settings.min_free,
             "resume_at": guard.resume,
             "stopped": guard.stopped,
