@@ -25,6 +25,7 @@ import time
 import uuid
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from operator import attrgetter
 from pathlib import Path
 from typing import Any
 
@@ -58,6 +59,8 @@ RETRY_MAX = 8.0
 #: a file system with less free space than this is not worth a retry yet
 MIN_FREE_BYTES = 1 << 20
 
+#: every counter of the recorder, as a tuple
+_RAW_COUNTERS = attrgetter(*COUNTER_FIELDS)
 #: runs file work the drain thread must not wait for (fsync, metadata) in order, elsewhere
 Background = Callable[[Callable[[], None]], None]
 
@@ -113,7 +116,8 @@ class MetaState:
     counters_at_open: dict[str, int] = field(default_factory=dict)
     #: when the metadata was last rewritten
     meta_at: float = 0.0
-    meta_counters: dict[str, int] = field(default_factory=dict)
+    #: every counter (:data:`_RAW_COUNTERS`) when it was last rewritten
+    meta_raw: tuple[int, ...] = ()
     #: sessions found cut at start, marked by the first session's first entries
     cut_sessions: list[SessionMeta] = field(default_factory=list)
     #: set whenever a session opens or closes (a log server's warmer waits on it)
@@ -399,13 +403,20 @@ class SessionKeeping:
 
         self._background(write)
 
+    def _meta_stale(self) -> bool:
+        """Return whether a counter changed since the metadata was last rewritten.
+
+        One C call and a tuple comparison: asked at every tick and every sleep.
+        """
+        return _RAW_COUNTERS(self.stats) != self._m.meta_raw
+
     def _update_meta(self, now: float, **changes: Any) -> None:
         """Rewrite the open session's metadata with the current counters (and ``changes``)."""
         session, meta = self.session, self._m.meta
         if session is None or meta is None:
             return
         counters = self._session_counters()
-        self._m.meta_counters = counters
+        self._m.meta_raw = _RAW_COUNTERS(self.stats)
         self._m.meta = dataclasses.replace(meta, counters=counters, updated=now, **changes)
         self._m.meta_at = now
         self._write_meta(session, self._m.meta)
@@ -617,7 +628,7 @@ class SessionKeeping:
         if (
             self._m.meta is not None
             and now - self._m.meta_at >= META_INTERVAL - META_EARLY
-            and self._session_counters() != self._m.meta_counters
+            and self._meta_stale()
         ):
             self._update_meta(now)
 
@@ -638,7 +649,7 @@ class SessionKeeping:
         unit = session.unit_due()
         if unit is not None:
             due = min(due, unit)
-        if self._m.meta is not None and self._session_counters() != self._m.meta_counters:
+        if self._m.meta is not None and self._meta_stale():
             due = min(due, self._m.meta_at + META_INTERVAL)
         return due
 
