@@ -219,11 +219,18 @@ def _log_server(root: str, vehicle: str, cfg: LoggerConfig, zopts: SessionOption
             catalog.root, (path.parent.name, path.name)
         )[0]
         pruner.fetching = lambda: catalog.leases.sessions(catalog.root.path)
+        # The warmer hashes each session the recorder closes: told, it needs no polling.
+        changes = recorder.session_changes
         if not own_session:
-            return LogServer(recorder_session, catalog, root=root, vehicle=vehicle).start().close
+            server = LogServer(
+                recorder_session, catalog, root=root, vehicle=vehicle, session_changes=changes
+            )
+            return server.start().close
         session = open_session(zopts)
         try:
-            server = LogServer(session, catalog, root=root, vehicle=vehicle).start()
+            server = LogServer(
+                session, catalog, root=root, vehicle=vehicle, session_changes=changes
+            ).start()
         except BaseException:
             session.close()
             raise

@@ -19,6 +19,7 @@ writes of the background writer.
 
 from __future__ import annotations
 
+import math
 import os
 import threading
 from collections.abc import Iterable
@@ -141,8 +142,9 @@ class DiskGuard:
     """The guard's and retention's state (one object on the Recorder)."""
 
     settings: DiskSettings
-    #: when the free space is checked next, and what it was
+    #: when the free space is checked next, when it was last, and what it was
     check_at: float = 0.0
+    checked_at: float = 0.0
     free: int | None = None
     #: writing stopped by the guard (the reason shown), and how often it stopped
     stopped: str | None = None
@@ -194,10 +196,20 @@ class DiskKeeping(ModeKeeping):
         return self._disk.stopped
 
     def _disk_tick(self, now: float) -> None:
-        """Check the free space once a second; stop writing below MinFreeDisk; retain."""
+        """Check the free space once a second; stop writing below MinFreeDisk; retain.
+
+        Without MinFreeDisk nothing depends on the free space: it is read when the status
+        asks for it (:meth:`disk_status`), not every second.
+        """
         guard = self._disk
-        if now < guard.check_at:
-            return
+        if guard.settings.min_free and now >= guard.check_at:
+            self._guard_check(now)
+        if guard.settings.retention and now >= guard.retain_at:
+            self.retain(now)
+
+    def _guard_check(self, now: float) -> None:
+        guard = self._disk
+        guard.checked_at = now
         free = guard.free = free_bytes(self.log_root)
         low = guard.settings.min_free
         near = free is not None and low and free < 2 * guard.resume
@@ -210,8 +222,20 @@ class DiskKeeping(ModeKeeping):
                 self._disk_stop(now, free)
         elif guard.stopped is not None and free is not None and free >= guard.resume:
             guard.stopped = None
-        if guard.settings.retention and now >= guard.retain_at:
-            self.retain(now)
+
+    def _disk_due(self) -> float:
+        """Return when :meth:`_disk_tick` next has work (epoch; inf: nothing timed).
+
+        The guard's check once a second (at every tick as well once near the bound), and
+        retention's next pass.
+        """
+        guard = self._disk
+        due = math.inf
+        if guard.settings.min_free:
+            due = guard.checked_at + CHECK_INTERVAL
+        if guard.settings.retention and guard.policies():
+            due = min(due, guard.retain_at)
+        return due
 
     def _disk_stop(self, now: float, free: int) -> None:
         guard = self._disk
@@ -314,7 +338,7 @@ class DiskKeeping(ModeKeeping):
         guard = self._disk
         settings = guard.settings
         return {
-            "free": guard.free,
+            "free": guard.free if settings.min_free else free_bytes(self.log_root),
             "min_free": settings.min_free,
             "resume_at": guard.resume,
             "stopped": guard.stopped,

@@ -55,9 +55,20 @@ _POLL = 0.001
 #: stream keeps it polling, which batches samples per pass (one write per batch), and a
 #: handover to a watcher thread costs a few thread switches
 _SPIN = 4
-#: the longest the drain thread sleeps with nothing to do: the session directory's removal
-#: is noticed within it (and systemd's watchdog is fed at a third of WatchdogSec if less)
-_MAX_SLEEP = 1.0
+#: the same after a sample woke the sleeping thread: whatever woke it came more than the
+#: polls' span after the sample before, so a stream that slow gains nothing from them (an
+#: idle recorder's own PLOGGER_STATUS cost four wake-ups each). One poll still catches a
+#: stream of a sample a millisecond or so that was taken for an idle spell (a poll that
+#: finds samples makes the thread poll ``_SPIN`` times again) ...
+_SPIN_AFTER_SLEEP = 1
+#: ... when the sample before came less than this long before (seconds); after a longer
+#: silence (an idle recorder's own status line, a MOOS app's burst at its AppTick) the poll
+#: found nothing, and the stragglers of a burst cost no more handed over by the watcher
+_STREAM = 0.005
+#: the longest the drain thread sleeps with nothing to do, whatever the engine says
+#: (:meth:`Recorder.due_in`: its next PLOGGER_STATUS is 2 s away at most); systemd's
+#: watchdog is fed at a third of WatchdogSec if that is less
+_MAX_SLEEP = 2.0
 
 
 class Fifo(Protocol):
@@ -327,7 +338,8 @@ class Drain:
         """Sleep until a sample, a command, stop or the recorder's next timer."""
         for inbox in self.inboxes:
             inbox.lend()
-        timeout = min(self._max_sleep, max(0.001, self.recorder.due_in()))
+        timeout = min(self._max_sleep, self.recorder.due_in(), self.misses.due_in())
+        timeout = max(0.001, timeout)
         self.sleeps += 1
         self.wake.wait(timeout)
 
@@ -394,6 +406,11 @@ class Drain:
         sleep = time.sleep
         next_tick = 0.0
         idle = 0
+        spin = _SPIN
+        #: the last pass ended in a poll (not a sleep until there is work)
+        polled = False
+        #: when the last pass that took samples ran
+        sampled = 0.0
         stop = self._stop
         commands = recorder.commands
         watchdog = self._watchdog
@@ -405,7 +422,19 @@ class Drain:
                 commands.run_queued()
             if not got:
                 self._drained_at = now
-            if now >= next_tick or idle > _SPIN:
+            else:
+                sampled = now
+                if polled:
+                    spin = _SPIN  # a poll found samples: a stream, keep polling
+            if got or commands.pending:
+                idle = 0
+            else:
+                idle += 1
+            polled = False
+            # Past its polls the thread runs the timers before it sleeps, so that it does
+            # not wake again at once for what a pass just made due (an fsync, metadata).
+            resting = idle > spin
+            if now >= next_tick or resting:
                 next_tick = now + _TICK
                 # Heartbeats read now are trusted once the FIFOs were seen empty after this.
                 self._read_beats()
@@ -413,12 +442,13 @@ class Drain:
                 recorder.tick()
                 if watchdog is not None:
                     watchdog(now)
-            if got or commands.pending:
-                idle = 0
-            else:
-                idle += 1
-                if idle <= _SPIN:
-                    # Samples that come meanwhile wait for the next pass at most this long.
-                    sleep(_POLL)
-                elif not stop.is_set():
-                    self._sleep()
+            if not idle:
+                continue
+            if not resting:
+                # Samples that come meanwhile wait for the next pass at most this long.
+                sleep(_POLL)
+                polled = True
+            elif not stop.is_set():
+                self._sleep()
+                # The wake-up's sample, if any, came ``monotonic() - sampled`` after the last.
+                spin = _SPIN_AFTER_SLEEP if monotonic() - sampled < _STREAM else 0

@@ -455,8 +455,11 @@ class Recorder(Intake):
     def due_in(self) -> float:
         """Return how long :meth:`tick` has nothing to do (seconds; 0: call it now).
 
-        The drain thread sleeps that long when no sample comes (at most a second, so the
-        session directory's removal is still noticed), instead of polling.
+        The drain thread sleeps that long when no sample comes, instead of polling: until
+        the next PLOGGER_STATUS at the latest (every 2 s, a tick that also notices the
+        session directory's removal), or sooner for whatever else has a time (MONITOR, slog
+        rows, fsync, metadata, compressed units, gaps, retries, the disk guard, retention,
+        a split by duration, the end of a snapshot).
         """
         if self._unflushed_since is not None:
             return 0.0
@@ -467,7 +470,8 @@ class Recorder(Intake):
             due = min(due, timers.missed + MISSED_REPORT_INTERVAL)
         if self.synclog is not None and self.session is not None:
             due = min(due, timers.last_row + self.config.sync_period)
-        return max(0.0, min(due, self._session_due(now)) - now)
+        due = min(due, self._session_due(now), self._disk_due(), self._modes_due())
+        return max(0.0, min(due, self._snapshot_due()) - now)
 
     def _write_slog(self, text: str, patch: SlotPatch | None = None) -> None:
         session = self.session

@@ -23,6 +23,7 @@ then read as one log (their offsets continue), as rosbag2's split files do.
 
 from __future__ import annotations
 
+import math
 import uuid
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -184,6 +185,13 @@ class ModeKeeping(SessionKeeping):
             )
         self._modes.split_at = now
         return self.cut_session("command")
+
+    def _modes_due(self) -> float:
+        """Return when :meth:`_modes_tick` next has work (epoch; inf: nothing timed)."""
+        modes = self._modes
+        if self.session is None or modes.paused or modes.split_duration is None:
+            return math.inf
+        return modes.part_opened + modes.split_duration
 
     def _modes_tick(self, now: float) -> None:
         """Split the open part if it reached its size or duration (never while paused)."""

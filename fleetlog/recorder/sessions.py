@@ -18,11 +18,14 @@ from __future__ import annotations
 
 import contextlib
 import dataclasses
+import math
 import os
+import threading
 import time
 import uuid
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from operator import attrgetter
 from pathlib import Path
 from typing import Any
 
@@ -43,6 +46,10 @@ __all__ = ["MIN_FREE_BYTES", "Background", "Health", "MetaState", "SessionKeepin
 
 #: the session metadata is rewritten at most this often while counters change
 META_INTERVAL = 2.0
+#: ... or up to this much sooner when the drain thread is awake for other work anyway: an
+#: idle recorder's own PLOGGER_STATUS changes the counters every 2 s, and without this slack
+#: the rewrite drifted a few ms away from the tick that logs that line, a wake-up of its own
+META_EARLY = 0.25
 #: losses that did not break the session (DROP publishers', unreadable keys) are marked in
 #: the alog at most this often
 GAP_INTERVAL = 1.0
@@ -52,6 +59,8 @@ RETRY_MAX = 8.0
 #: a file system with less free space than this is not worth a retry yet
 MIN_FREE_BYTES = 1 << 20
 
+#: every counter of the recorder, as a tuple
+_RAW_COUNTERS = attrgetter(*COUNTER_FIELDS)
 #: runs file work the drain thread must not wait for (fsync, metadata) in order, elsewhere
 Background = Callable[[Callable[[], None]], None]
 
@@ -107,9 +116,12 @@ class MetaState:
     counters_at_open: dict[str, int] = field(default_factory=dict)
     #: when the metadata was last rewritten
     meta_at: float = 0.0
-    meta_counters: dict[str, int] = field(default_factory=dict)
+    #: every counter (:data:`_RAW_COUNTERS`) when it was last rewritten
+    meta_raw: tuple[int, ...] = ()
     #: sessions found cut at start, marked by the first session's first entries
     cut_sessions: list[SessionMeta] = field(default_factory=list)
+    #: set whenever a session opens or closes (a log server's warmer waits on it)
+    changed: threading.Event = field(default_factory=threading.Event)
 
 
 class SessionKeeping:
@@ -174,6 +186,11 @@ class SessionKeeping:
     def meta(self) -> SessionMeta | None:
         """The open session's metadata."""
         return self._m.meta
+
+    @property
+    def session_changes(self) -> threading.Event:
+        """Set whenever a session opens or closes (never cleared here: the waiter clears it)."""
+        return self._m.changed
 
     @property
     def cut_sessions(self) -> list[SessionMeta]:
@@ -243,6 +260,7 @@ class SessionKeeping:
             layout = dataclasses.replace(layout, path=path)
         session = SessionWriter.open(layout, self.logstart, when=now, cwd=self._cwd)
         self.session = session
+        self._m.changed.set()
         self._h.in_fallback = path is not None
         self._unflushed_since = None
         self.stats.sessions += 1
@@ -337,6 +355,7 @@ class SessionKeeping:
 
     def _finish(self, session: SessionWriter) -> None:
         """Sync a closed session's files and write its last metadata, off this thread."""
+        self._m.changed.set()
         meta = self._m.meta
         self._m.meta = None
         final = None
@@ -384,13 +403,20 @@ class SessionKeeping:
 
         self._background(write)
 
+    def _meta_stale(self) -> bool:
+        """Return whether a counter changed since the metadata was last rewritten.
+
+        One C call and a tuple comparison: asked at every tick and every sleep.
+        """
+        return _RAW_COUNTERS(self.stats) != self._m.meta_raw
+
     def _update_meta(self, now: float, **changes: Any) -> None:
         """Rewrite the open session's metadata with the current counters (and ``changes``)."""
         session, meta = self.session, self._m.meta
         if session is None or meta is None:
             return
         counters = self._session_counters()
-        self._m.meta_counters = counters
+        self._m.meta_raw = _RAW_COUNTERS(self.stats)
         self._m.meta = dataclasses.replace(meta, counters=counters, updated=now, **changes)
         self._m.meta_at = now
         self._write_meta(session, self._m.meta)
@@ -599,18 +625,23 @@ class SessionKeeping:
                 and (self._h.unsynced or session.unit_due() is not None)
             ):
                 self._sync(now)
-        if now - self._m.meta_at >= META_INTERVAL and self._m.meta is not None:
-            self._m.meta_at = now
-            if self._session_counters() != self._m.meta_counters:
-                self._update_meta(now)
+        if (
+            self._m.meta is not None
+            and now - self._m.meta_at >= META_INTERVAL - META_EARLY
+            and self._meta_stale()
+        ):
+            self._update_meta(now)
 
     def _session_due(self, now: float) -> float:
-        """Return when :meth:`_session_tick` next has work (epoch; a second away at most)."""
+        """Return when :meth:`_session_tick` next has work (epoch; inf: nothing timed).
+
+        The directory's removal is checked at every tick, which comes at least every 2 s
+        (PLOGGER_STATUS), and at every flush.
+        """
         session = self.session
         if session is None:
-            return self._h.retry_at if self._h.broken is not None else now + 1.0
-        # The directory's removal is checked at least once a second.
-        due = now + 1.0
+            return self._h.retry_at if self._h.broken is not None else math.inf
+        due = math.inf
         if self.losses:
             due = min(due, self._h.gaps_at + GAP_INTERVAL)
         if self.config.fsync_interval > 0 and self._h.unsynced:
@@ -618,7 +649,7 @@ class SessionKeeping:
         unit = session.unit_due()
         if unit is not None:
             due = min(due, unit)
-        if self._m.meta is not None:
+        if self._m.meta is not None and self._meta_stale():
             due = min(due, self._m.meta_at + META_INTERVAL)
         return due
 

@@ -20,6 +20,7 @@ Its state is one object on the Recorder (:class:`SnapshotState`).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -292,6 +293,17 @@ class SnapshotTaking(DiskKeeping):
         self._update_meta(self._clock(), notes=notes)
 
     # -- writing
+
+    def _snapshot_due(self) -> float:
+        """Return when :meth:`_snapshot_tick` next has work (epoch; inf: nothing timed).
+
+        While a snapshot is written, each tick writes a slice and makes a flush due (the
+        drain thread then ticks again at once); its end is the time it closes.
+        """
+        snap = self._snap
+        if snap is None or not snap.saving:
+            return math.inf
+        return snap.until
 
     def _snapshot_tick(self, now: float) -> None:
         """Write the next slice of the snapshot; close it once written past its end."""

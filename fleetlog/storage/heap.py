@@ -25,11 +25,11 @@ import os
 import threading
 import time
 from collections.abc import Callable
-from pathlib import Path
+
+from fleetlog.storage.procinfo import Statm
 
 __all__ = ["HeapKeeper", "resident_bytes", "trim_heap"]
 
-_STATM = Path("/proc/self/statm")
 #: resident growth (bytes) since the lowest seen that makes the keeper trim
 GROW = 32 << 20
 #: seconds between two looks at the resident size
@@ -61,13 +61,15 @@ def trim_heap() -> bool:
     return True
 
 
+#: kept open: a keeper looks every few seconds, each time with cold caches
+_STATM = Statm()
+_PAGE = os.sysconf("SC_PAGE_SIZE")
+
+
 def resident_bytes() -> int | None:
     """Return this process's resident size in bytes (None where ``/proc`` does not say)."""
-    try:
-        pages = int(_STATM.read_text(encoding="ascii").split()[1])
-    except (OSError, ValueError, IndexError):
-        return None
-    return pages * os.sysconf("SC_PAGE_SIZE")
+    pages = _STATM.pages()
+    return None if pages is None else pages * _PAGE
 
 
 class HeapKeeper:

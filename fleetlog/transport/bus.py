@@ -9,6 +9,7 @@ what it lost (:class:`MissCounter`).
 from __future__ import annotations
 
 import contextlib
+import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -445,6 +446,17 @@ class MissCounter:
                 self._add(source, last - source.expected + 1)
                 source.expected = last + 1
         self._waiting = waiting
+
+    def due_in(self) -> float:
+        """Return how long until the oldest waiting heartbeat may be trusted (inf: none waits).
+
+        The drain thread reads heartbeats at its ticks; one read while it then sleeps is
+        trusted ``settle_delay`` later, not at whatever tick comes next.
+        """
+        if not self._waiting:
+            return math.inf
+        beats = [source.beat[0] for source in self._waiting if source.beat is not None]
+        return max(0.0, min(beats, default=math.inf) + self._settle_delay - self._clock())
 
     def take(self) -> list[tuple[str, str, int]]:
         """Return and forget the losses found so far: ``(key, publisher zid, count)``."""

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import threading
 import time
 from pathlib import Path
 
@@ -12,6 +13,7 @@ import pytest
 from helpers import free_port
 from query_support import wait_for
 
+from fleetlog.query import server as server_module
 from fleetlog.query.server import LogServer
 from fleetlog.storage import confined
 from fleetlog.storage.catalog import LogCatalog
@@ -82,5 +84,39 @@ def test_the_server_warms_the_latest_session_and_each_closed_one(tmp_path: Path)
             # Started without a recorder: the latest complete session is hashed at once.
             latest = logs / "B_2_1_2025_____00_00_00" / "B_2_1_2025_____00_00_00.alog"
             wait_for(lambda: server.catalog.digests.known(os.stat(latest)) is not None, 10, "B")
+    finally:
+        session.close()
+
+
+def test_a_recorder_that_tells_its_server_of_session_changes_is_not_polled(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The recorder's own server: the warmer sleeps until the recorder closes a session."""
+    monkeypatch.setattr(server_module, "_WARM_POLL", 3600.0)  # a poll would never come
+    logs = tmp_path / "logs"
+    second = old_session(logs, "B_2_1_2025_____00_00_00", 1 << 20)
+    state: dict[str, Path | None] = {"active": logs / "B_2_1_2025_____00_00_00"}
+    catalog = LogCatalog(logs, vehicle="v", active=lambda: state["active"])
+    changes = threading.Event()
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    session = open_session(SessionOptions(listen=(endpoint,), multicast_scouting=False))
+    try:
+        server = LogServer(session, catalog, session_changes=changes)
+        with server:
+            time.sleep(0.2)
+            state["active"] = None  # the recorder closed B, and says so
+            changes.set()
+            wait_for(
+                lambda: (
+                    catalog.digests.known(
+                        os.stat(logs / "B_2_1_2025_____00_00_00" / "B_2_1_2025_____00_00_00.alog")
+                    )
+                    == hashlib.sha256(second).hexdigest()
+                ),
+                10,
+                "B hashed",
+            )
+            began = time.monotonic()
+        assert time.monotonic() - began < 5.0  # closing wakes the waiting warmer
     finally:
         session.close()

@@ -159,6 +159,25 @@ def test_malformed_requests_are_counted_and_a_full_queue_refuses_at_once(
     assert (stats.commands, stats.refused_commands) == (QUEUE_LIMIT + 4, 4)
 
 
+def test_the_recorder_tells_when_its_session_opens_or_closes(rigs: Callable[..., Rig]) -> None:
+    """What a log server's warmer waits on (instead of looking every 2 s)."""
+    rig = rigs()
+    changes = rig.rec.session_changes
+    assert not changes.is_set()
+    rig.rec.start()
+    assert changes.is_set()
+    changes.clear()
+    rig.send("A", 1.0, at=0.5)
+    rig.clock.t = T0 + 2.5
+    rig.rec.tick()
+    assert not changes.is_set()  # writing is no change
+    rig.send("LOGGER_RESTART", "now", at=3.0)
+    assert changes.is_set()
+    changes.clear()
+    rig.rec.stop()
+    assert changes.is_set()
+
+
 def test_metadata_follows_the_session_and_never_changes_once_closed(
     tmp_path: Path, rigs: Callable[..., Rig]
 ) -> None:

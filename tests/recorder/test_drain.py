@@ -95,6 +95,31 @@ def test_the_engine_says_how_long_it_has_nothing_to_do(rigs: Callable[..., Any])
     assert rig.rec.due_in() > 0.0
 
 
+@pytest.mark.parametrize(
+    ("body", "at", "idle"),
+    [
+        ("", 0.25, 1.75),  # the next PLOGGER_STATUS
+        ("MinFreeDisk = 1MB", 0.25, 1.0),  # the guard's check, once a second
+        ("SplitDuration = 1s", 0.25, 0.75),  # the next part
+        ("KeepSessions = 5", 0.25, 0.0),  # retention's first pass is due at the first tick
+    ],
+    ids=["status", "disk-guard", "split", "retention"],
+)
+def test_every_timed_duty_bounds_the_idle_sleep(
+    rigs: Callable[..., Any],  # noqa: F811
+    body: str,
+    at: float,
+    idle: float,
+) -> None:
+    """The drain thread sleeps until the engine's next timer: none may wait for another."""
+    rig = rigs(f"File = R\nPath = logs\nLog = A @ 0\nFsyncInterval = 0\n{body}")
+    rig.rec.start()
+    rig.clock.t = T0 + at
+    if idle:
+        rig.rec.tick()
+    assert rig.rec.due_in() == pytest.approx(idle, abs=1e-6)
+
+
 def test_a_compressed_unit_still_open_is_due_in_a_quarter_second(
     rigs: Callable[..., Any],  # noqa: F811
 ) -> None:

@@ -131,6 +131,22 @@ def test_a_heartbeat_reveals_losses_at_the_end_of_a_burst() -> None:
     assert counter.take() == []
 
 
+def test_a_waiting_heartbeat_says_when_it_may_be_trusted() -> None:
+    """The drain thread reads heartbeats at its ticks, and sleeps until one may be trusted."""
+    clock = Clock()
+    counter = MissCounter(clock=clock, settle_delay=0.5)
+    assert counter.due_in() == float("inf")
+    feed(counter, "k/A", "z1", 1, 0, 1)
+    beat(counter, "k/A", "z1", 1, 4)
+    clock.t += 0.2
+    assert counter.due_in() == pytest.approx(0.3)
+    clock.t += 0.3
+    assert counter.due_in() == 0.0
+    counter.settle(drained_at=clock.t)
+    assert counter.take() == [("k/A", "z1", 3)]
+    assert counter.due_in() == float("inf")
+
+
 def test_heartbeats_of_unknown_publishers_or_malformed_are_ignored() -> None:
     clock = Clock()
     counter = MissCounter(clock=clock)

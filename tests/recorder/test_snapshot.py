@@ -72,6 +72,23 @@ def test_a_snapshot_holds_exactly_the_window_plus_each_latest_older_value(
     assert rig.rec.stats.logged == 84
 
 
+def test_a_snapshot_that_records_on_is_closed_on_time_by_an_idle_recorder(
+    rigs: Callable[..., Rig],
+) -> None:
+    """Nothing arrives after the trigger: the drain thread sleeps until the snapshot's end."""
+    rig = rigs("File = R\nPath = logs\nLog = A @ 0\nSnapshotSeconds = 2\nSnapshotAfter = 0.5")
+    rig.rec.start()
+    for k in range(1, 17):  # 2 s at 8 Hz
+        rig.send("A", float(k), at=k * STEP)
+    assert rig.control({"cmd": "snapshot", "source": "shore"}).ok
+    finish(rig, 2.0)  # the window is written; the snapshot records on until 2.5 s
+    assert rig.rec.session is not None
+    assert rig.rec.due_in() == pytest.approx(0.5, abs=1e-6)
+    rig.clock.t = T0 + 2.5
+    rig.rec.tick()
+    assert rig.rec.session is None
+
+
 def test_snapshot_after_records_on_and_a_second_trigger_extends_it(
     rigs: Callable[..., Rig],
 ) -> None:

@@ -3,10 +3,14 @@
 from __future__ import annotations
 
 import json
+import os
 import subprocess
 import sys
 
+import pytest
+
 from fleetlog.storage.heap import HeapKeeper
+from fleetlog.storage.procinfo import Statm
 
 MiB = 1 << 20
 
@@ -90,3 +94,22 @@ def test_gives_back_what_the_c_heap_keeps() -> None:
     assert result["can"]
     assert result["trims"] == 1
     assert result["released"] > 64 * MiB, result
+
+
+def test_the_resident_size_is_read_again_through_one_descriptor() -> None:
+    """``/proc/self/statm`` stays open (an idle recorder reads it with cold caches)."""
+    statm = Statm()
+    first = statm.pages()
+    if first is None:
+        pytest.skip("no /proc/self/statm here")
+    held = bytearray(64 << 20)
+    held[::4096] = b"x" * len(range(0, len(held), 4096))  # touched: resident
+    grown = statm.pages()
+    assert grown is not None
+    assert grown - first >= (60 << 20) // os.sysconf("SC_PAGE_SIZE")
+    assert len(held) == 64 << 20
+    statm.close()
+    again = statm.pages()  # opened again
+    assert again is not None
+    assert abs(again - grown) < (8 << 20) // os.sysconf("SC_PAGE_SIZE")
+    statm.close()
