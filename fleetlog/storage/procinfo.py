@@ -104,7 +104,3 @@ class ProcessMonitor:
             now_kb = peak_kb
         load = self.cpu_load(usage)
         return f"cpuload={load:.4g},memory_kb={now_kb:.4g},memory_max_kb={peak_kb:.4g}"
-
-    def close(self) -> None:
-        """Close ``/proc/self/statm`` (read again, reopened, if asked after)."""
-        self._statm.close()
