@@ -6,7 +6,7 @@ writes nothing more: MOOS_DEBUG and the status say why, what arrives meanwhile i
 (reason ``low-disk``, marked as a gap in the next session), and writing resumes in a new
 session once the free space is back above the bound plus a margin (:data:`MARGIN`, so a
 disk at the edge does not open a session a second) — the same path the recorder takes after
-a full disk (:mod:`fleetlog.recorder.sessions`, docs/reliability.md §1).
+a full disk (:mod:`fleetlog.recorder.faults`, docs/reliability.md §1).
 
 Retention: ``KeepSessions`` and ``MaxLogSize`` bound what the log root keeps, and the guard
 frees space by removing sessions the shore has acknowledged. The policies here only choose;
@@ -29,8 +29,8 @@ from typing import TYPE_CHECKING, Any
 
 from fleetlog.errors import StorageError
 from fleetlog.moos.keep_settings import DiskSettings
+from fleetlog.recorder.faults import MIN_FREE_BYTES
 from fleetlog.recorder.modes import ModeKeeping
-from fleetlog.recorder.sessions import MIN_FREE_BYTES
 from fleetlog.storage import retention
 from fleetlog.storage.retention import RetentionView, StoredSession
 from fleetlog.storage.session import SessionWriter

@@ -34,10 +34,11 @@ from fleetlog.recorder.control import (
     quote,
 )
 from fleetlog.recorder.disk import DiskGuard
+from fleetlog.recorder.faults import Health
 from fleetlog.recorder.intake import Intake, VarState
 from fleetlog.recorder.losses import LossLedger
 from fleetlog.recorder.modes import ModeState
-from fleetlog.recorder.sessions import Background, Health, MetaState, inline
+from fleetlog.recorder.sessions import Background, MetaState, inline
 from fleetlog.recorder.snapshot_mode import SKEW_TOLERANCE, SnapshotState
 from fleetlog.recorder.stats import RecorderStats
 from fleetlog.storage.metafile import boot_id, host_name
