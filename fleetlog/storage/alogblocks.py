@@ -77,8 +77,8 @@ def parse_block(
     col = pl.col
     line = col("l")
     found = find_heads(pl, text, state.literals)
-    lines, heads, comments = found.lines, found.heads, found.comments
-    n = lines.height
+    heads, comments = found.heads, found.comments
+    n = found.n
     comment_idx = comments["idx"]
     entries = found.entries
 
@@ -86,9 +86,9 @@ def parse_block(
     # they are stray lines.
     orphans: list[int] = []
     continued = False
-    if found.is_head is not None and found.is_entry is not None:
+    if found.is_head is not None and found.is_entry is not None and found.lines is not None:
         is_head = found.is_head
-        tagged = lines.with_columns(
+        tagged = found.lines.with_columns(
             gid=is_head.cast(pl.Int32).cum_sum(), head=is_head, entry=found.is_entry
         )
         owner = tagged.filter(col("head")).select("gid", "entry")
