@@ -10,6 +10,9 @@
   and whose directory nobody has locked has no live recorder, so it is *cut*. Where
   ``flock`` is not supported (some network file systems), the file's host, pid and boot id
   decide instead.
+* **A cut session's last sign of life** is the later of its file's ``updated`` and the last
+  ``PLOGGER_STATUS`` line in its plain alog's tail (the recorder logs its own status every
+  2 s, and rewrites the file only every :data:`IDLE_REWRITE` s while that is all it logs).
 * ``<logroot>/.fleetlog-acks.jsonl``: the shore collector's acknowledgements, appended one
   JSON line at a time after checking that the session and its files exist.
 """
@@ -17,6 +20,7 @@
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import errno
 import fcntl
 import json
@@ -28,6 +32,8 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from fleetlog.errors import FormatError, StorageError
+from fleetlog.storage.alogtail import read_tail
+from fleetlog.storage.columns import polars_module
 from fleetlog.wire.session_meta import ACKS_NAME, CUT, MAX_META_BYTES, META_NAME, OPEN, SessionMeta
 
 __all__ = [
@@ -35,6 +41,7 @@ __all__ = [
     "append_ack",
     "boot_id",
     "host_name",
+    "last_status",
     "mark_cut_sessions",
     "read_meta",
     "recorder_alive",
@@ -42,6 +49,14 @@ __all__ = [
 ]
 
 _TMP_SUFFIX = ".tmp"
+#: An open session's metadata is rewritten at least this often (seconds) while counters
+#: change; more often (2 s) while more than its recorder's own status lines are logged.
+IDLE_REWRITE = 10.0
+#: The bytes of a cut session's alog looked at for its recorder's last status line: the
+#: tail of an idle log holds several; a busy one's file was rewritten within 2 s anyway.
+_STATUS_TAIL = 64 << 10
+#: The recorder's own status variable (pLogger's), logged every 2 s.
+_STATUS_VAR = "PLOGGER_STATUS"
 _BOOT_ID = Path("/proc/sys/kernel/random/boot_id")
 #: attempts to take a session's lock that a short probe (a listing) may hold for microseconds
 _LOCK_TRIES = 5
@@ -247,6 +262,31 @@ def recorder_alive(directory: Path, meta: SessionMeta | None = None) -> bool:
     return not taken
 
 
+def last_status(directory: Path, meta: SessionMeta, now: float) -> float | None:
+    """When the dead recorder of an open session last logged its status, if later than ``updated``.
+
+    Read from the last :data:`_STATUS_TAIL` bytes of the session's plain alog (compressed
+    ones are not read from the end: their file is rewritten every 2 s). A time beyond
+    ``updated`` + :data:`IDLE_REWRITE` (+2 s) or after ``now`` cannot be the recorder's own
+    (it rewrote the file at least that often, and the line is in the past), so the answer
+    stays within that window whatever the log holds. None when the tail says nothing later.
+    """
+    if meta.logstart is None or meta.updated is None:
+        return None
+    alog = directory / f"{directory.name}.alog"
+    try:
+        if not stat.S_ISREG(alog.lstat().st_mode):
+            return None
+        tail = read_tail(alog, _STATUS_TAIL)
+    except (OSError, StorageError):
+        return None
+    pl = polars_module()
+    latest = min(now, meta.updated + IDLE_REWRITE + 2.0)
+    times = tail.filter(pl.col("var") == _STATUS_VAR)["offset"] + meta.logstart
+    times = times.filter(times.is_finite() & (times > meta.updated) & (times <= latest))
+    return float(times.max()) if times.len() else None  # type: ignore[arg-type]
+
+
 def mark_cut_sessions(log_root: Path, now: float) -> list[SessionMeta]:
     """Mark ``cut`` every session under ``log_root`` left ``open`` by a recorder that died.
 
@@ -283,6 +323,9 @@ def mark_cut_sessions(log_root: Path, now: float) -> list[SessionMeta]:
             if meta is None or meta.state != OPEN:
                 continue
             cut = meta.with_state(CUT, now)
+            last = last_status(directory, meta, now)
+            if last is not None:
+                cut = dataclasses.replace(cut, updated=last)
             try:
                 write_meta(directory, cut)
             except StorageError:

@@ -17,6 +17,7 @@ import pytest
 from alog_oracle import iter_entries
 from recorder_support import DIGEST, T0, Rig, rigs
 
+from fleetlog.moos.alog import LineFormatter, format_banner
 from fleetlog.recorder.control import QUEUE_LIMIT, RING_SIZE
 from fleetlog.storage.metafile import boot_id, host_name, recorder_alive, write_meta
 from fleetlog.wire.control import ControlRequest, Outcome
@@ -254,6 +255,79 @@ def test_a_session_left_open_by_a_dead_recorder_is_cut_and_marked_in_the_next(
     assert (first.key, first.source) == ("PLOGGER_GAP", "pLogger")
     assert first.value == f"reason=crash,lost=?,from={T0 - 50:.3f},to={T0:.3f},session=R_OLD"
     assert rig.meta(session).gaps[0].reason == "crash"
+
+
+def test_an_idle_recorder_rewrites_its_metadata_every_10_s_a_busy_one_every_2_s(
+    rigs: Callable[..., Rig],
+) -> None:
+    """Idle: only the recorder's own status lines (1 every 2 s); busy: more than 8 lines."""
+    rig = rigs("File = R\nPath = logs\nWildcardLogging = true")
+    rig.rec.start()
+    rig.clock.t = T0 + 0.1
+    rig.rec.tick()  # the first rewrite after the open
+    written = []
+    for step in range(1, 16):  # 30 s of an idle recorder: a status line every 2 s
+        rig.send("PLOGGER_STATUS", f"Uptime={2 * step}", at=2.0 * step, source="pLogger")
+        rig.rec.tick()
+        written.append(rig.meta().updated - T0)
+    assert sorted(set(written)) == [pytest.approx(t) for t in (0.1, 10.0, 20.0, 30.0)]
+    for i in range(9):  # a stream starts: the 2 s rewrite again
+        rig.send("A", float(i), at=31.0)
+    rig.clock.t = T0 + 32.0
+    rig.rec.tick()
+    assert rig.meta().updated == T0 + 32.0
+    assert rig.meta().counters["logged"] == 15 + 9
+
+
+def test_the_metadata_of_a_compressed_idle_log_is_rewritten_every_2_s(
+    rigs: Callable[..., Rig],
+) -> None:
+    """A compressed alog's tail is not read after a crash: its file is the sign of life."""
+    rig = rigs("File = R\nPath = logs\nWildcardLogging = true\nCompressAlogs = true")
+    rig.rec.start()
+    rig.clock.t = T0 + 0.1
+    rig.rec.tick()
+    rig.send("PLOGGER_STATUS", "Uptime=2", at=2.0, source="pLogger")
+    rig.rec.tick()
+    assert rig.meta().updated == T0 + 2.0
+
+
+def test_a_crash_gap_starts_at_the_dead_recorders_last_status_line(
+    tmp_path: Path, rigs: Callable[..., Rig]
+) -> None:
+    """Its metadata was rewritten 9 s before it died; its status lines went on to the end."""
+    rig = rigs()
+    dead = tmp_path / "logs" / "R_OLD"
+    dead.mkdir(parents=True)
+    start = T0 - 100
+    fmt = LineFormatter()
+    lines = [format_banner("./R_OLD/R_OLD.alog", start, "then")]
+    for t in (40.0, 42.0, 44.0, 46.0, 48.0, 50.0):
+        lines.append(fmt.string(t, "PLOGGER_STATUS", "pLogger", f"Uptime={t}"))
+    lines.append(fmt.string(99.9, "PLOGGER_STATUS", "pOther", "a forged line: too late"))
+    (dead / "R_OLD.alog").write_text("".join(lines))
+    crashed = SessionMeta(
+        state="open",
+        vehicle="alpha",
+        session="R_OLD",
+        recorder="zid-0",
+        fleetlog="0",
+        opened=start,
+        logstart=start,
+        updated=start + 41.0,
+        host=host_name(),
+        pid=os.getpid(),
+        boot=boot_id(),
+    )
+    write_meta(dead, crashed)
+    rig.rec.start()
+    cut = rig.meta(dead)
+    assert cut == replace(crashed, state="cut", closed=T0, updated=start + 50.0)
+    rig.rec.stop()
+    (session,) = [d for d in (tmp_path / "logs").iterdir() if d.name != "R_OLD"]
+    with open(session / f"{session.name}.alog", encoding="utf-8") as f:
+        first = next(iter_entries(f))
+    assert first.value == f"reason=crash,lost=?,from={start + 50:.3f},to={T0:.3f},session=R_OLD"
 
 
 def test_ack_checks_the_session_and_appends_a_line(

@@ -15,13 +15,17 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from fleetlog.errors import FormatError, StorageError
+from fleetlog.moos.alog import LineFormatter, format_banner
 from fleetlog.storage.metafile import (
     DirLock,
     append_ack,
     boot_id,
     host_name,
+    last_status,
     mark_cut_sessions,
     read_meta,
     recorder_alive,
@@ -180,3 +184,55 @@ def test_a_session_of_another_host_is_never_cut_here(tmp_path: Path) -> None:
     assert recorder_alive(fetched, read_meta(fetched))
     assert mark_cut_sessions(tmp_path, now=5.0) == []
     assert read_meta(fetched).state == "open"  # type: ignore[union-attr]
+
+
+_STATUS = "PLOGGER_STATUS  "
+
+
+def _dead_session(root: Path, alog: bytes) -> tuple[Path, SessionMeta]:
+    directory = root / "D"
+    directory.mkdir(exist_ok=True)
+    (directory / "D.alog").write_bytes(alog)
+    return directory, replace(meta("D"), logstart=1000.0, updated=1040.0)
+
+
+def test_last_status_reads_the_plain_alogs_tail_within_its_window(tmp_path: Path) -> None:
+    fmt = LineFormatter()
+    lines = [format_banner("./D/D.alog", 1000.0, "then")]
+    lines += [fmt.string(t, "PLOGGER_STATUS", "pLogger", "Uptime=1") for t in (38.0, 44.0, 48.5)]
+    lines.append(fmt.double(49.0, "NAV_X", "pNav", 1.0))  # not a sign of the recorder's life
+    directory, dead = _dead_session(tmp_path, "".join(lines).encode())
+    assert last_status(directory, dead, now=2000.0) == 1048.5
+    # never after ``now``, never beyond ``updated`` + 12 s
+    assert last_status(directory, dead, now=1046.0) == 1044.0
+    assert last_status(directory, replace(dead, updated=1030.0), now=2000.0) == 1038.0
+    assert last_status(directory, replace(dead, updated=1049.0), now=2000.0) is None
+    assert last_status(directory, replace(dead, logstart=None), now=2000.0) is None
+    # compressed, missing or not a regular file: not read
+    (directory / "D.alog").rename(directory / "D.alog.gz")
+    assert last_status(directory, dead, now=2000.0) is None
+    (directory / "D.alog").symlink_to(directory / "D.alog.gz")
+    assert last_status(directory, dead, now=2000.0) is None
+
+
+@settings(
+    max_examples=150, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    body=st.binary(max_size=3000)
+    | st.lists(
+        st.tuples(st.floats(allow_nan=True, allow_infinity=True), st.text(max_size=20)),
+        max_size=20,
+    ).map(
+        lambda rows: "".join(
+            f"{t!s:<15} {_STATUS}     pLogger         {v}\n" for t, v in rows
+        ).encode(errors="surrogatepass")
+    ),
+)
+def test_last_status_of_a_hostile_tail_is_none_or_in_its_window(
+    tmp_path: Path, body: bytes
+) -> None:
+    banner = format_banner("./D/D.alog", 1000.0, "then").encode()
+    directory, dead = _dead_session(tmp_path, banner + body)
+    got = last_status(directory, dead, now=1045.0)
+    assert got is None or 1040.0 < got <= 1045.0
