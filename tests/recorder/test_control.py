@@ -257,14 +257,20 @@ def test_a_session_left_open_by_a_dead_recorder_is_cut_and_marked_in_the_next(
     assert rig.meta(session).gaps[0].reason == "crash"
 
 
+def _wildcard_rig(rigs: Callable[..., Rig], more: str) -> Rig:
+    """A started wildcard recorder whose metadata was rewritten at T0 + 0.1 (the first time)."""
+    rig = rigs(f"File = R\nPath = logs\nWildcardLogging = true\n{more}")
+    rig.rec.start()
+    rig.clock.t = T0 + 0.1
+    rig.rec.tick()
+    return rig
+
+
 def test_an_idle_recorder_rewrites_its_metadata_every_10_s_a_busy_one_every_2_s(
     rigs: Callable[..., Rig],
 ) -> None:
     """Idle: only the recorder's own status lines (1 every 2 s); busy: more than 8 lines."""
-    rig = rigs("File = R\nPath = logs\nWildcardLogging = true")
-    rig.rec.start()
-    rig.clock.t = T0 + 0.1
-    rig.rec.tick()  # the first rewrite after the open
+    rig = _wildcard_rig(rigs, "")
     written = []
     for step in range(1, 16):  # 30 s of an idle recorder: a status line every 2 s
         rig.send("PLOGGER_STATUS", f"Uptime={2 * step}", at=2.0 * step, source="pLogger")
@@ -283,10 +289,7 @@ def test_the_metadata_of_a_compressed_idle_log_is_rewritten_every_2_s(
     rigs: Callable[..., Rig],
 ) -> None:
     """A compressed alog's tail is not read after a crash: its file is the sign of life."""
-    rig = rigs("File = R\nPath = logs\nWildcardLogging = true\nCompressAlogs = true")
-    rig.rec.start()
-    rig.clock.t = T0 + 0.1
-    rig.rec.tick()
+    rig = _wildcard_rig(rigs, "CompressAlogs = true")
     rig.send("PLOGGER_STATUS", "Uptime=2", at=2.0, source="pLogger")
     rig.rec.tick()
     assert rig.meta().updated == T0 + 2.0
