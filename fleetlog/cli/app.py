@@ -57,8 +57,9 @@ def main() -> None:
     """Run the CLI; any FleetlogError becomes one sentence on stderr and exit status 1."""
     try:
         # Inside the guard: a Ctrl-C while the commands (and zenoh) load is a quiet exit too.
-        from fleetlog.cli import commands  # noqa: F401  (registers the commands)
+        from fleetlog.cli import commands
 
+        commands.load(sys.argv[1:])  # the command being run registers itself (or all do)
         app()
     except FleetlogError as err:
         print(f"fleetlog: error: {err}", file=sys.stderr)

@@ -22,8 +22,9 @@ ISOLATED = ["--no-keys", "--wait", "0", "--no-multicast-scouting"]
 
 def invoke(*args: str) -> BaseException | None:
     """Run the command in-process; return the FleetlogError it ended with (the CLI prints it)."""
-    from fleetlog.cli import commands  # noqa: F401  (registers the commands)
+    from fleetlog.cli import commands
 
+    commands.load(["replay"])  # registers it
     result = CliRunner().invoke(app, ["replay", *args, *ISOLATED])
     return result.exception
 
