@@ -161,6 +161,21 @@ class CommandHandler:
         self._remember(outcome, when=msg.time, via=msg.name, source=msg.source, text=text)
         return outcome
 
+    def throttled(self, msg: MoosMessage, period: float) -> None:
+        """A command that came inside its variable's delivery interval: not run, but said so.
+
+        pLogger registers LOGGER_RESTART with a 0.5 s period, so its MOOSDB does not deliver
+        a second one within 0.5 s; here the command is refused in the ring (what ``poke``
+        reports) and counted, without a MOOS_DEBUG post (a flood must not become one).
+        """
+        value = msg.value
+        text = value if isinstance(value, str) else repr(value)
+        task = "restart" if msg.name == self.restart_var else "?"
+        why = f"{msg.name} is taken at most once every {period:g} s (as pLogger registers it)"
+        self._remember(
+            Outcome.refused(task, why), when=msg.time, via=msg.name, source=msg.source, text=text
+        )
+
     def _plogger_cmd(self, value: float | str | bytes, msg_source: str) -> Outcome:
         rec = self._rec
         var = self.command_var

@@ -97,6 +97,9 @@ class Intake(SnapshotTaking):
             # The MOOSDB's minimum delivery interval: posts inside it are not delivered.
             if now - var.last_logged < var.period:
                 stats.throttled += 1
+                if is_command:
+                    # Not run, as pLogger's MOOSDB would not deliver it; but said so.
+                    self.commands.throttled(msg, var.period)
                 return
             var.last_logged = now
         verdict = var.verdict

@@ -75,6 +75,35 @@ def test_moos_commands_keep_their_debug_text_and_land_in_the_ring(
     assert (stats.commands, stats.refused_commands) == (7, 4)
 
 
+def test_a_restart_inside_half_a_second_of_the_last_is_refused_in_the_ring(
+    rigs: Callable[..., Rig],
+) -> None:
+    """pLogger registers LOGGER_RESTART at 0.5 s: a second one that soon is not run, as its
+    MOOSDB would not deliver it, but the ring says so (poke reports it) and it is counted."""
+    rig = rigs()
+    rig.rec.start()
+    rig.send("LOGGER_RESTART", "true", at=1.0)
+    second = rig.dir
+    rig.debugs()
+    rig.send("LOGGER_RESTART", "true", at=1.3, source="uPoke")
+    assert rig.dir == second  # not run
+    assert rig.debugs() == []  # no MOOS_DEBUG per throttled command (a flood stays one)
+    last = rig.rec.status()["commands"][-1]
+    assert (last["via"], last["cmd"], last["ok"], last["source"]) == (
+        "LOGGER_RESTART",
+        "restart",
+        False,
+        "uPoke",
+    )
+    assert (
+        last["why"] == "LOGGER_RESTART is taken at most once every 0.5 s (as pLogger registers it)"
+    )
+    stats = rig.rec.stats
+    assert (stats.throttled, stats.commands, stats.refused_commands) == (1, 2, 1)
+    rig.send("LOGGER_RESTART", "true", at=1.6)  # 0.6 s after the one that ran
+    assert rig.dir != second
+
+
 def test_the_ring_keeps_the_last_64(tmp_path: Path, rigs: Callable[..., Rig]) -> None:
     rig = rigs()
     rig.rec.start()

@@ -57,7 +57,12 @@ def record_of(archive: Path, vehicle: str) -> VehicleRecord:
     return found
 
 
-def until(check: Callable[[], bool], what: str, timeout: float = 60.0) -> None:
+def until(
+    check: Callable[[], bool],
+    what: str,
+    timeout: float = 60.0,
+    detail: Callable[[], str] = lambda: "",
+) -> None:
     deadline = time.monotonic() + timeout
     while True:
         try:
@@ -66,7 +71,7 @@ def until(check: Callable[[], bool], what: str, timeout: float = 60.0) -> None:
         except (OSError, ValueError, AssertionError):
             pass  # a record being replaced, a file not there yet
         if time.monotonic() > deadline:
-            pytest.fail(f"timed out after {timeout} s waiting for {what}")
+            pytest.fail(f"timed out after {timeout} s waiting for {what}{detail()}")
         time.sleep(0.1)
 
 
@@ -88,7 +93,16 @@ def restart(fleet: Fleet, vehicle: Vehicle) -> str:
             vehicle.sessions()[-1].name != before and meta_state(vehicle.log_root / before) != OPEN
         ),
         f"{vehicle.name}'s restart to close {before}",
+        # what to look at if it never does
+        detail=lambda: (
+            f"\npoke said: {done.stdout}{done.stderr}\nsessions and their state: "
+            + ", ".join(f"{d.name}={_state_or_why(d)}" for d in vehicle.sessions())
+            + f"\nrecorder said: {vehicle.recorder.output[-3000:] if vehicle.recorder else ''}"
+        ),
     )
+    # The recorder takes LOGGER_RESTART at most once every 0.5 s, as pLogger registers it: a
+    # second poke sooner is refused (CI once had two 0.4 s apart, and waited for nothing).
+    time.sleep(0.6)
     return before
 
 
@@ -104,6 +118,13 @@ def final_files(archive: Path) -> dict[Path, tuple[int, int]]:
 
 def meta_state(directory: Path) -> str:
     return SessionMeta.from_bytes((directory / META_NAME).read_bytes()).state
+
+
+def _state_or_why(directory: Path) -> str:
+    try:
+        return meta_state(directory)
+    except Exception as err:  # a diagnostic: say what stopped it
+        return f"({err})"
 
 
 def test_every_session_reaches_the_shore(fleet: Fleet, tmp_path: Path) -> None:
