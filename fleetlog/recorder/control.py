@@ -170,8 +170,10 @@ class CommandHandler:
         """
         value = msg.value
         text = value if isinstance(value, str) else repr(value)
-        task = "restart" if msg.name == self.restart_var else "?"
-        why = f"{msg.name} is taken at most once every {period:g} s (as pLogger registers it)"
+        restart = msg.name == self.restart_var
+        task = "restart" if restart else "?"
+        rule = "as pLogger registers it" if restart else "its period in the mission file"
+        why = f"{msg.name} is taken at most once every {period:g} s ({rule})"
         self._remember(
             Outcome.refused(task, why), when=msg.time, via=msg.name, source=msg.source, text=text
         )
