@@ -20,7 +20,7 @@ from collections.abc import Callable, Iterator
 from pathlib import Path
 
 import pytest
-from collect_support import Fleet, Vehicle, namespaces_unavailable
+from collect_support import Fleet, Spawned, Vehicle, namespaces_unavailable
 from query_support import same_tree
 
 from fleetlog.storage.archive import VehicleRecord, load_record
@@ -127,6 +127,15 @@ def _state_or_why(directory: Path) -> str:
         return f"({err})"
 
 
+def _collector_state(archive: Path, vehicle: str, session: str, collect: Spawned) -> str:
+    """What to look at when the collector never finishes a session: its record and output."""
+    try:
+        entry: object = record_of(archive, vehicle).sessions.get(session)
+    except Exception as err:  # a diagnostic: say what stopped it
+        entry = f"({err})"
+    return f"\nshore record of {session}: {entry}\ncollect said: {collect.output[-4000:]}"
+
+
 def test_every_session_reaches_the_shore(fleet: Fleet, tmp_path: Path) -> None:
     alpha, bravo = fleet.add("alpha"), fleet.add("bravo")
     for vehicle in (alpha, bravo):
@@ -141,7 +150,11 @@ def test_every_session_reaches_the_shore(fleet: Fleet, tmp_path: Path) -> None:
 
     # A session closed by LOGGER_RESTART is followed to its end and marked complete.
     a1 = restart(fleet, alpha)
-    until(lambda: state_on_shore(archive, "alpha", a1) == "complete", f"alpha {a1} complete")
+    until(
+        lambda: state_on_shore(archive, "alpha", a1) == "complete",
+        f"alpha {a1} complete",
+        detail=lambda: _collector_state(archive, "alpha", a1, collect),
+    )
 
     # The link to alpha is cut in the middle of its current session's files, then restored.
     a2 = alpha.sessions()[-1].name
@@ -165,7 +178,11 @@ def test_every_session_reaches_the_shore(fleet: Fleet, tmp_path: Path) -> None:
     collect = fleet.spawn(*args)
     collect.wait_for("alpha: up")
     a2 = restart(fleet, alpha)
-    until(lambda: state_on_shore(archive, "alpha", a2) == "complete", f"alpha {a2} complete")
+    until(
+        lambda: state_on_shore(archive, "alpha", a2) == "complete",
+        f"alpha {a2} complete",
+        detail=lambda: _collector_state(archive, "alpha", a2, collect),
+    )
     until(
         lambda: all(e.acked for e in record_of(archive, "alpha").sessions.values() if e.done),
         "alpha's sessions acknowledged",
