@@ -271,7 +271,13 @@ class LogCatalog:
             return None
         if meta.state != OPEN or session == self.active_session():
             return meta.state
-        return OPEN if recorder_alive(self.root.resolve(session), meta) else CUT
+        if recorder_alive(self.root.resolve(session), meta):
+            return OPEN
+        # A recorder writes its session's last version before it lets the lock go: read
+        # again, or a session closed between the first read and the lock's would be "cut"
+        # (and archived so on the shore: CI saw it, right after a LOGGER_RESTART).
+        now = self._meta(session)
+        return now.state if now is not None and now.state != OPEN else CUT
 
     # -- sessions
 

@@ -14,6 +14,7 @@ from pathlib import Path
 
 from query_support import Fleet, make_session
 
+from fleetlog.storage.catalog import LogCatalog
 from fleetlog.storage.metafile import boot_id, host_name, write_meta
 from fleetlog.wire.session_meta import SessionMeta
 
@@ -67,3 +68,18 @@ def test_states_and_clock_warnings_reach_the_shore(fleet: Fleet, tmp_path: Path)
     up = fleet.cli("fleet")
     assert up.returncode == 0, up.stderr
     assert "gen's clock was not synchronised when its latest session" in up.stderr
+
+
+def test_a_session_closed_between_reading_its_file_and_its_lock_is_closed(
+    tmp_path: Path,
+) -> None:
+    """The listing read ``open``; then the recorder wrote ``closed`` and let its lock go."""
+    root = tmp_path / "logs"
+    name = NAMES[0]
+    directory = make_session(root, name, 0.01)
+    write_meta(directory, meta(name, "closed", True))  # on disk now; nobody holds the lock
+    catalog = LogCatalog(root, vehicle="gen")
+    assert catalog.state(name, meta(name, "open", True)) == "closed"
+    # a session whose file still says open when nobody holds it is cut
+    write_meta(directory, meta(name, "open", True))
+    assert catalog.state(name, meta(name, "open", True)) == "cut"
