@@ -17,7 +17,7 @@ import pytest
 from alog_oracle import iter_entries
 from recorder_support import DIGEST, T0, Rig, rigs
 
-from fleetlog.moos.alog import LineFormatter, format_banner
+from fleetlog.moos.alog import Entry, LineFormatter, format_banner
 from fleetlog.recorder.control import QUEUE_LIMIT, RING_SIZE
 from fleetlog.storage.metafile import boot_id, host_name, recorder_alive, write_meta
 from fleetlog.wire.control import ControlRequest, Outcome
@@ -249,13 +249,11 @@ def test_metadata_follows_the_session_and_never_changes_once_closed(
     assert sorted(p.name for p in first.iterdir() if p.name.startswith(".")) == [META_NAME]
 
 
-def test_a_session_left_open_by_a_dead_recorder_is_cut_and_marked_in_the_next(
-    tmp_path: Path, rigs: Callable[..., Rig]
-) -> None:
-    rig = rigs()
+def _dead_session(tmp_path: Path, alog: str, updated: float) -> tuple[Path, SessionMeta]:
+    """R_OLD, left open by a recorder that died (nobody holds its lock), opened at T0 - 100."""
     dead = tmp_path / "logs" / "R_OLD"
     dead.mkdir(parents=True)
-    (dead / "R_OLD.alog").write_text("")
+    (dead / "R_OLD.alog").write_text(alog)
     crashed = SessionMeta(
         state="open",
         vehicle="alpha",
@@ -264,12 +262,26 @@ def test_a_session_left_open_by_a_dead_recorder_is_cut_and_marked_in_the_next(
         fleetlog="0",
         opened=T0 - 100,
         logstart=T0 - 100,
-        updated=T0 - 50,
+        updated=updated,
         host=host_name(),
         pid=os.getpid(),
         boot=boot_id(),
     )
-    write_meta(dead, crashed)  # nobody holds its lock: its recorder died
+    write_meta(dead, crashed)
+    return dead, crashed
+
+
+def _first_entry_of_the_next_session(tmp_path: Path) -> Entry:
+    (session,) = [d for d in (tmp_path / "logs").iterdir() if d.name != "R_OLD"]
+    with open(session / f"{session.name}.alog", encoding="utf-8") as f:
+        return next(iter_entries(f))
+
+
+def test_a_session_left_open_by_a_dead_recorder_is_cut_and_marked_in_the_next(
+    tmp_path: Path, rigs: Callable[..., Rig]
+) -> None:
+    rig = rigs()
+    dead, crashed = _dead_session(tmp_path, "", updated=T0 - 50)
     rig.rec.start()
     cut = rig.meta(dead)
     assert (cut.state, cut.closed) == ("cut", T0)
@@ -277,12 +289,10 @@ def test_a_session_left_open_by_a_dead_recorder_is_cut_and_marked_in_the_next(
     assert cut == replace(crashed, state="cut", closed=T0)
     rig.rec.stop()
     assert (dead / "R_OLD.alog").read_text() == ""  # only its metadata is touched
-    new = [d for d in (tmp_path / "logs").iterdir() if d.name != "R_OLD"]
-    (session,) = new
-    with open(session / f"{session.name}.alog", encoding="utf-8") as f:
-        first = next(iter_entries(f))
+    first = _first_entry_of_the_next_session(tmp_path)
     assert (first.key, first.source) == ("PLOGGER_GAP", "pLogger")
     assert first.value == f"reason=crash,lost=?,from={T0 - 50:.3f},to={T0:.3f},session=R_OLD"
+    (session,) = [d for d in (tmp_path / "logs").iterdir() if d.name != "R_OLD"]
     assert rig.meta(session).gaps[0].reason == "crash"
 
 
@@ -329,36 +339,18 @@ def test_a_crash_gap_starts_at_the_dead_recorders_last_status_line(
 ) -> None:
     """Its metadata was rewritten 9 s before it died; its status lines went on to the end."""
     rig = rigs()
-    dead = tmp_path / "logs" / "R_OLD"
-    dead.mkdir(parents=True)
     start = T0 - 100
     fmt = LineFormatter()
     lines = [format_banner("./R_OLD/R_OLD.alog", start, "then")]
     for t in (40.0, 42.0, 44.0, 46.0, 48.0, 50.0):
         lines.append(fmt.string(t, "PLOGGER_STATUS", "pLogger", f"Uptime={t}"))
     lines.append(fmt.string(99.9, "PLOGGER_STATUS", "pOther", "a forged line: too late"))
-    (dead / "R_OLD.alog").write_text("".join(lines))
-    crashed = SessionMeta(
-        state="open",
-        vehicle="alpha",
-        session="R_OLD",
-        recorder="zid-0",
-        fleetlog="0",
-        opened=start,
-        logstart=start,
-        updated=start + 41.0,
-        host=host_name(),
-        pid=os.getpid(),
-        boot=boot_id(),
-    )
-    write_meta(dead, crashed)
+    dead, crashed = _dead_session(tmp_path, "".join(lines), updated=start + 41.0)
     rig.rec.start()
     cut = rig.meta(dead)
     assert cut == replace(crashed, state="cut", closed=T0, updated=start + 50.0)
     rig.rec.stop()
-    (session,) = [d for d in (tmp_path / "logs").iterdir() if d.name != "R_OLD"]
-    with open(session / f"{session.name}.alog", encoding="utf-8") as f:
-        first = next(iter_entries(f))
+    first = _first_entry_of_the_next_session(tmp_path)
     assert first.value == f"reason=crash,lost=?,from={start + 50:.3f},to={T0:.3f},session=R_OLD"
 
 
