@@ -470,7 +470,7 @@ class SessionKeeping(StorageFaults):
                 self._sync(now)
         if (
             self._m.meta is not None
-            and now - self._m.meta_at >= META_INTERVAL - META_EARLY
+            and now - self._m.meta_at >= META_INTERVAL - META_EARLY  # the cheap test first
             and self._meta_stale()
             and now - self._m.meta_at >= self._meta_interval() - META_EARLY
         ):

@@ -45,10 +45,10 @@ from fleetlog.moos.naming import HINT_FILE_NAME, parse_hint_file, parse_session_
 from fleetlog.storage.alogscan import HeadInfo, VariableScan, is_compressed, read_head, tail_offset
 from fleetlog.storage.confined import ConfinedRoot, DigestCache
 from fleetlog.storage.leases import FileLeases
-from fleetlog.storage.metafile import read_meta, recorder_alive
+from fleetlog.storage.metafile import read_meta, recorder_alive, session_state
 from fleetlog.storage.sessionalog import ALOG_SUFFIXES, holds_alog
 from fleetlog.wire.query import FileInfo, FileMeta, LatestInfo, SessionInfo, check_component
-from fleetlog.wire.session_meta import CUT, META_NAME, OPEN, SessionMeta
+from fleetlog.wire.session_meta import META_NAME, OPEN, SessionMeta
 
 __all__ = ["ALOG_SUFFIXES", "QUIET_SECONDS", "LogCatalog", "disk_space"]
 
@@ -271,13 +271,7 @@ class LogCatalog:
             return None
         if meta.state != OPEN or session == self.active_session():
             return meta.state
-        if recorder_alive(self.root.resolve(session), meta):
-            return OPEN
-        # A recorder writes its session's last version before it lets the lock go: read
-        # again, or a session closed between the first read and the lock's would be "cut"
-        # (and archived so on the shore: CI saw it, right after a LOGGER_RESTART).
-        now = self._meta(session)
-        return now.state if now is not None and now.state != OPEN else CUT
+        return session_state(self.root.resolve(session), meta)
 
     # -- sessions
 

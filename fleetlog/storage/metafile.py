@@ -45,6 +45,7 @@ __all__ = [
     "mark_cut_sessions",
     "read_meta",
     "recorder_alive",
+    "session_state",
     "write_meta",
 ]
 
@@ -260,6 +261,22 @@ def recorder_alive(directory: Path, meta: SessionMeta | None = None) -> bool:
     if taken is None:
         return meta is None or _alive_by_process(meta)
     return not taken
+
+
+def session_state(directory: Path, meta: SessionMeta) -> str:
+    """Return a session's state as a reader reports it: ``open`` with no live recorder is ``cut``.
+
+    ``meta`` was read before the lock was tested; a recorder writes its session's last
+    version before it lets the lock go, so the file is read again once the lock is free,
+    or a session closed in between (a LOGGER_RESTART) would be called cut.
+    """
+    if meta.state != OPEN or recorder_alive(directory, meta):
+        return meta.state
+    try:
+        now = read_meta(directory)
+    except (StorageError, FormatError):
+        now = None
+    return now.state if now is not None and now.state != OPEN else CUT
 
 
 def last_status(directory: Path, meta: SessionMeta, now: float) -> float | None:
