@@ -12,7 +12,15 @@ import queue
 import threading
 from collections.abc import Callable
 
-__all__ = ["BackgroundWriter"]
+__all__ = ["Background", "BackgroundWriter", "inline"]
+
+#: runs file work the drain thread must not wait for (fsync, metadata) in order, elsewhere
+Background = Callable[[Callable[[], None]], None]
+
+
+def inline(job: Callable[[], None]) -> None:
+    """Run ``job`` now (the default: tests and embedding without a background thread)."""
+    job()
 
 
 class BackgroundWriter:

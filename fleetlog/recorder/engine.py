@@ -23,6 +23,7 @@ from fleetlog.moos.mission import LoggerConfig, LogSpec, parse_log_spec
 from fleetlog.moos.naming import copy_file_name
 from fleetlog.moos.patterns import NAMES_CACHED, Verdict, WildcardClassifier, name_to_chunk
 from fleetlog.moos.slog import SlogTable, SlotPatch
+from fleetlog.recorder.background import Background, inline
 from fleetlog.recorder.clocksync import clock_state
 from fleetlog.recorder.control import (
     MAX_COPIES,
@@ -37,8 +38,8 @@ from fleetlog.recorder.disk import DiskGuard
 from fleetlog.recorder.faults import Health
 from fleetlog.recorder.intake import Intake, VarState
 from fleetlog.recorder.losses import LossLedger
+from fleetlog.recorder.metadata import MetaState
 from fleetlog.recorder.modes import ModeState
-from fleetlog.recorder.sessions import Background, MetaState, inline
 from fleetlog.recorder.snapshot_mode import SKEW_TOLERANCE, SnapshotState
 from fleetlog.recorder.stats import RecorderStats
 from fleetlog.storage.metafile import boot_id, host_name

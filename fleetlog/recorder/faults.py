@@ -4,8 +4,9 @@
 that handles a failed write: pLogger's fallback (the working directory), a session
 directory removed while recording, a full or read-only file system and the automatic new
 session once writing works again. Every loss is counted by variable and marked
-(``PLOGGER_GAP``, docs/compat.md). Opening and closing sessions and their metadata are in
-:mod:`fleetlog.recorder.sessions`.
+(``PLOGGER_GAP``, docs/compat.md). Opening and closing sessions is
+:mod:`fleetlog.recorder.sessions`; keeping their metadata current,
+:mod:`fleetlog.recorder.metadata`.
 """
 
 from __future__ import annotations

@@ -1,16 +1,18 @@
-"""The recorder's sessions: opening and closing them, their metadata, fsync and gaps.
+"""The recorder's sessions: opening and closing them, fsync and gaps.
 
 :class:`SessionKeeping` is the half of :class:`~fleetlog.recorder.engine.Recorder` that owns
 the open :class:`~fleetlog.storage.session.SessionWriter`: the first session (after marking
-the sessions a dead recorder left open as cut), LOGGER_RESTART, clean close, the session
-metadata (``.fleetlog-session.json``, written off the recording thread), the background
-fsync and the losses marked in the alog (``PLOGGER_GAP``, docs/compat.md). What happens when
-the disk fails is its base, :mod:`fleetlog.recorder.faults`; the other half, what to log and
-how, is in :mod:`fleetlog.recorder.engine`.
+the sessions a dead recorder left open as cut), LOGGER_RESTART, clean close and each
+session's first and last metadata, the background fsync and the losses marked in the alog
+(``PLOGGER_GAP``, docs/compat.md). Its bases: keeping the open session's metadata current,
+:mod:`fleetlog.recorder.metadata`; what happens when the disk fails,
+:mod:`fleetlog.recorder.faults`. The other half, what to log and how, is in
+:mod:`fleetlog.recorder.engine`.
 
-Its state lives in two small groups (:class:`Health`, :class:`MetaState`) rather than on the
-Recorder: CPython keeps at most 30 attributes of an object inline, and the hot path reads
-the Recorder's (docs/reliability.md).
+Its state lives in small groups (:class:`~fleetlog.recorder.faults.Health`,
+:class:`~fleetlog.recorder.metadata.MetaState`) rather than on the Recorder: CPython keeps at
+most 30 attributes of an object inline, and the hot path reads the Recorder's
+(docs/reliability.md).
 """
 
 from __future__ import annotations
@@ -18,12 +20,8 @@ from __future__ import annotations
 import dataclasses
 import math
 import os
-import threading
 import time
 import uuid
-from collections.abc import Callable
-from dataclasses import dataclass, field
-from operator import attrgetter
 from pathlib import Path
 from typing import Any
 
@@ -33,65 +31,22 @@ from fleetlog.moos.alog import LineFormatter, Variant
 from fleetlog.moos.mission import LoggerConfig
 from fleetlog.moos.slog import SlogTable, SlotPatch
 from fleetlog.recorder.clocksync import clock_state
-from fleetlog.recorder.faults import RETRY_FIRST, StorageFaults
+from fleetlog.recorder.faults import RETRY_FIRST
 from fleetlog.recorder.losses import reason_of
-from fleetlog.recorder.stats import COUNTER_FIELDS
-from fleetlog.storage.metafile import IDLE_REWRITE, mark_cut_sessions
+from fleetlog.recorder.metadata import MetadataKeeping
+from fleetlog.storage.metafile import mark_cut_sessions
 from fleetlog.storage.session import SessionLayout, SessionWriter
 from fleetlog.wire.control import Outcome
 from fleetlog.wire.session_meta import CLOSED, MAX_GAPS, OPEN, Gap, SessionMeta
 
-__all__ = ["Background", "MetaState", "SessionKeeping", "inline"]
+__all__ = ["GAP_INTERVAL", "SessionKeeping"]
 
-#: the session metadata is rewritten at most this often while counters change
-META_INTERVAL = 2.0
-#: ... or up to this much sooner when the drain thread is awake for other work anyway: an
-#: idle recorder's own PLOGGER_STATUS changes the counters every 2 s, and without this slack
-#: the rewrite drifted a few ms away from the tick that logs that line, a wake-up of its own
-META_EARLY = 0.25
-#: ... but only every IDLE_REWRITE s while the recorder logs little besides its own status
-#: (at most this many entries since the last rewrite, no other counter moved) into a plain
-#: alog: a crash's gap then starts at the last PLOGGER_STATUS in the alog's tail
-#: (storage.metafile.last_status), as precisely as before, for a fifth of the rewrites
-#: (each a file created, fsynced and renamed, and the directory fsynced: CPU, and flash
-#: wear, on an idle vehicle)
-META_IDLE_LINES = 8
-#: the counters an idle recorder's own status lines move (at most META_IDLE_LINES each)
-_QUIET_MOVERS = frozenset(COUNTER_FIELDS.index(name) for name in ("received", "logged"))
 #: losses that did not break the session (DROP publishers', unreadable keys) are marked in
 #: the alog at most this often
 GAP_INTERVAL = 1.0
-#: every counter of the recorder, as a tuple
-_RAW_COUNTERS = attrgetter(*COUNTER_FIELDS)
-#: runs file work the drain thread must not wait for (fsync, metadata) in order, elsewhere
-Background = Callable[[Callable[[], None]], None]
 
 
-def inline(job: Callable[[], None]) -> None:
-    """Run ``job`` now (the default: tests and embedding without a background thread)."""
-    job()
-
-
-@dataclass
-class MetaState:
-    """The open session's metadata and what it is built from."""
-
-    recorder_id: str
-    host: str
-    boot: str
-    meta: SessionMeta | None = None
-    counters_at_open: dict[str, int] = field(default_factory=dict)
-    #: when the metadata was last rewritten
-    meta_at: float = 0.0
-    #: every counter (:data:`_RAW_COUNTERS`) when it was last rewritten
-    meta_raw: tuple[int, ...] = ()
-    #: sessions found cut at start, marked by the first session's first entries
-    cut_sessions: list[SessionMeta] = field(default_factory=list)
-    #: set whenever a session opens or closes (a log server's warmer waits on it)
-    changed: threading.Event = field(default_factory=threading.Event)
-
-
-class SessionKeeping(StorageFaults):
+class SessionKeeping(MetadataKeeping):
     """The session half of the Recorder (a mixin: the Recorder sets what it uses)."""
 
     # What it uses of the Recorder (set by Recorder.__init__).
@@ -101,8 +56,6 @@ class SessionKeeping(StorageFaults):
     vehicle: str
     mission_path: Path | None
     _cwd: Path
-    _background: Background
-    _m: MetaState
     _fmt: LineFormatter
 
     def post(self, name: str, value: float | str) -> None:
@@ -133,21 +86,6 @@ class SessionKeeping(StorageFaults):
     def synced_at(self) -> float | None:
         """When the open session's files were last fsynced (epoch)."""
         return self._h.synced_at
-
-    @property
-    def meta(self) -> SessionMeta | None:
-        """The open session's metadata."""
-        return self._m.meta
-
-    @property
-    def session_changes(self) -> threading.Event:
-        """Set whenever a session opens or closes (never cleared here: the waiter clears it)."""
-        return self._m.changed
-
-    @property
-    def cut_sessions(self) -> list[SessionMeta]:
-        """The sessions found cut when the recorder started."""
-        return self._m.cut_sessions
 
     @property
     def queue(self) -> int | None:
@@ -331,76 +269,6 @@ class SessionKeeping(StorageFaults):
         """Flush and close everything (clean shutdown)."""
         self._close_session()
 
-    def _forget_meta(self) -> None:
-        self._m.meta = None
-
-    # ---------------------------------------------------------------------------------------
-    # Session metadata
-
-    def _counters(self) -> dict[str, int]:
-        stats = self.stats
-        return {name: getattr(stats, name) for name in COUNTER_FIELDS}
-
-    def _session_counters(self) -> dict[str, int]:
-        base = self._m.counters_at_open
-        return {k: v - base.get(k, 0) for k, v in self._counters().items()}
-
-    def _write_meta(self, session: SessionWriter, meta: SessionMeta) -> None:
-        data = meta.to_bytes()
-
-        def write() -> None:
-            if session.closed:
-                return  # its final version is written by finish
-            try:
-                session.write_meta(data)
-            except StorageError as err:
-                self._background_failed(err)
-
-        self._background(write)
-
-    def _meta_stale(self) -> bool:
-        """Return whether a counter changed since the metadata was last rewritten.
-
-        One C call and a tuple comparison: asked at every tick and every sleep.
-        """
-        return _RAW_COUNTERS(self.stats) != self._m.meta_raw
-
-    def _meta_quiet(self) -> bool:
-        """Whether the counters moved as little as the recorder's own status lines move them.
-
-        In a plain alog only (the tail of a compressed one is not read after a crash).
-        """
-        if self.config.compress_alogs != "none":
-            return False
-        old = self._m.meta_raw
-        if len(old) != len(COUNTER_FIELDS):
-            return False  # not rewritten since the session opened
-        for i, (now, then) in enumerate(zip(_RAW_COUNTERS(self.stats), old, strict=True)):
-            if now != then and (i not in _QUIET_MOVERS or now - then > META_IDLE_LINES):
-                return False
-        return True
-
-    def _meta_interval(self) -> float:
-        """How long after the last rewrite the stale metadata is due."""
-        return IDLE_REWRITE if self._meta_quiet() else META_INTERVAL
-
-    def _update_meta(self, now: float, **changes: Any) -> None:
-        """Rewrite the open session's metadata with the current counters (and ``changes``)."""
-        session, meta = self.session, self._m.meta
-        if session is None or meta is None:
-            return
-        counters = self._session_counters()
-        self._m.meta_raw = _RAW_COUNTERS(self.stats)
-        self._m.meta = dataclasses.replace(meta, counters=counters, updated=now, **changes)
-        self._m.meta_at = now
-        self._write_meta(session, self._m.meta)
-
-    def _background_failed(self, err: StorageError) -> None:
-        """Report a failed fsync or metadata write (from the background thread)."""
-        self.stats.write_errors += 1
-        self.stats.last_error = str(err)
-        self.debug(f"write error: {err}")
-
     def gap(self, gap: Gap) -> None:
         """Mark a loss where it is noticed: a ``PLOGGER_GAP`` entry and a metadata gap."""
         session = self.session
@@ -468,13 +336,7 @@ class SessionKeeping(StorageFaults):
                 and (self._h.unsynced or session.unit_due() is not None)
             ):
                 self._sync(now)
-        if (
-            self._m.meta is not None
-            and now - self._m.meta_at >= META_INTERVAL - META_EARLY  # the cheap test first
-            and self._meta_stale()
-            and now - self._m.meta_at >= self._meta_interval() - META_EARLY
-        ):
-            self._update_meta(now)
+        self._meta_tick(now)
 
     def _session_due(self, now: float) -> float:
         """Return when :meth:`_session_tick` next has work (epoch; inf: nothing timed).
@@ -493,8 +355,9 @@ class SessionKeeping(StorageFaults):
         unit = session.unit_due()
         if unit is not None:
             due = min(due, unit)
-        if self._m.meta is not None and self._meta_stale():
-            due = min(due, self._m.meta_at + self._meta_interval())
+        meta = self._meta_due()
+        if meta is not None:
+            due = min(due, meta)
         return due
 
     def _end_lag_period(self) -> None:
