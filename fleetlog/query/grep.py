@@ -42,19 +42,12 @@ from fleetlog.wire.query import (
 if TYPE_CHECKING:
     import polars as pl
 
-__all__ = ["GREP_BLOCK", "GREP_BLOCK_SELECTIVE", "EntryFilter", "run_grep"]
+__all__ = ["GREP_BLOCK", "EntryFilter", "run_grep"]
 
-#: Decompressed bytes parsed per step in the recorder's process (about 26k lines), for a grep
-#: that reads every line whole (no literal: ``*``, a time window alone). Each block costs
-#: fixed work besides its lines: 1 MiB blocks took 1.05 CPU s for a 77 MB log, 2 MiB 0.87,
-#: 4 MiB 0.73, for +20 and +55 MiB of peak memory a grep (docs/bench.md §9.2).
+#: Decompressed bytes parsed per step in the recorder's process (about 26k lines). Each block
+#: costs ~5 ms of fixed work besides its lines: 1 MiB blocks took 1.05 CPU s for a 77 MB log,
+#: 2 MiB 0.87, 4 MiB 0.73, for +20 and +55 MiB of peak memory a grep (docs/bench.md §9.2).
 GREP_BLOCK = 2 << 20
-#: The same for a grep whose globs hold a literal (``NAV_X``, ``NAV_*``): most lines are
-#: never cut into fields, so the fixed work is most of a block's cost, and larger blocks
-#: cost little memory (NAV_X on the 77 MB log: 2 MiB 0.44 CPU s, +50 MiB peak; 4 MiB 0.37 s,
-#: +68 MiB; docs/bench.md §18). A block holding a multi-line value is read whole, as
-#: :data:`GREP_BLOCK` blocks are (+105 MiB peak for a log with one in every block).
-GREP_BLOCK_SELECTIVE = 4 << 20
 _KIND = {"double": "d", "string": "s", "binary": "b"}
 _COLUMNS = ("line", "offset", "var", "source", "type", "text")
 
@@ -229,8 +222,7 @@ def run_grep(
     size = len(chunk[0])
     matched = 0
     truncated = False
-    block = GREP_BLOCK_SELECTIVE if keep.literals else GREP_BLOCK
-    with AlogReader(path, errors="skip", block_size=block) as reader:
+    with AlogReader(path, errors="skip", block_size=GREP_BLOCK) as reader:
         for batch in reader.frames(_COLUMNS, where=keep):
             if cancel is not None and cancel.is_set():
                 msg = "the grep was cancelled (the server is closing)"

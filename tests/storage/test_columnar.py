@@ -115,6 +115,42 @@ def test_raw_is_the_entry_bytes_and_where_filters_before_typing(tmp_path: Path) 
         assert entries[0].text == "x\udcff"
 
 
+@pytest.mark.parametrize("block_size", [1024, 1500, 4096])
+def test_a_log_that_grows_during_a_pass_is_read_once_and_whole(
+    tmp_path: Path, block_size: int
+) -> None:
+    """A recorder appends while a grep reads: each entry once, in order, none cut.
+
+    A plain file's unfinished block end is sought back to and read again with the next
+    block; the file's end moving in between must not lose, repeat or split an entry.
+    """
+    path = tmp_path / "live.alog"
+
+    def entries(first: int, count: int) -> str:
+        return "".join(
+            f"{i / 100:.5f}".ljust(15)
+            + " "
+            + f"VAR_{i % 7}".ljust(20)
+            + " pNav"
+            + " " * 12
+            + f"value {i} "
+            + "x" * (i % 97)
+            + " \n"
+            for i in range(first, first + count)
+        )
+
+    path.write_text(BANNER + entries(0, 300) + entries(300, 1)[:25])  # the writer mid-line
+    seen: list[str] = []
+    with AlogReader(path, block_size=block_size) as reader:
+        passing = reader.entries()
+        seen.append(next(passing).text)
+        with path.open("a") as log:
+            log.write(entries(300, 1)[25:] + entries(301, 400))
+        seen.extend(entry.text for entry in passing)
+    expected = [f"value {i} " + "x" * (i % 97) for i in range(701)]
+    assert seen == expected
+
+
 def test_read_tail_gives_the_last_entries(tmp_path: Path) -> None:
     path = tmp_path / "t.alog"
     body = "".join(
