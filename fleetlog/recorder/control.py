@@ -26,7 +26,7 @@ from fleetlog.errors import FormatError, StorageError
 from fleetlog.moos.recording_modes import parse_note
 from fleetlog.recorder.pruning import Pruner
 from fleetlog.storage.metafile import append_ack
-from fleetlog.wire.control import CommandRecord, ControlRequest, Outcome
+from fleetlog.wire.control import MAX_TEXT, CommandRecord, ControlRequest, Outcome
 from fleetlog.wire.message import MoosMessage
 
 if TYPE_CHECKING:
@@ -148,7 +148,7 @@ class CommandHandler:
             stats.commands += 1
             stats.refused_commands += 1
             return _STOPPING
-        text = value if isinstance(value, str) else repr(value)
+        text = _ring_text(value)
         try:
             if msg.name == self.restart_var:
                 outcome = self._rec.restart()
@@ -169,7 +169,7 @@ class CommandHandler:
         reports) and counted, without a MOOS_DEBUG post (a flood must not become one).
         """
         value = msg.value
-        text = value if isinstance(value, str) else repr(value)
+        text = _ring_text(value)
         restart = msg.name == self.restart_var
         task = "restart" if restart else "?"
         rule = "as pLogger registers it" if restart else "its period in the mission file"
@@ -331,3 +331,18 @@ class CommandHandler:
         except StorageError as err:
             return Outcome.refused("ack", str(err))
         return Outcome.done("ack", f"acknowledged {len(files)} file(s) of session {session}")
+
+
+def _ring_text(value: float | str | bytes) -> str:
+    """A command's value as its ring record holds it: a string as it is, else its repr.
+
+    Of a binary value, only the bytes the record can show are written out (the record
+    keeps :data:`~fleetlog.wire.control.MAX_TEXT` characters): a flood of large binary
+    commands costs the drain thread no copy of each whole. (Its quote is chosen from those
+    bytes alone, where ``repr`` of the whole value might pick the other one.)
+    """
+    if isinstance(value, str):
+        return value
+    if isinstance(value, bytes) and len(value) > MAX_TEXT:
+        return repr(value[:MAX_TEXT])[:-1] + "…"
+    return repr(value)

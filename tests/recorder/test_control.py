@@ -20,7 +20,7 @@ from recorder_support import DIGEST, T0, Rig, rigs
 from fleetlog.moos.alog import Entry, LineFormatter, format_banner
 from fleetlog.recorder.control import QUEUE_LIMIT, RING_SIZE
 from fleetlog.storage.metafile import boot_id, host_name, recorder_alive, write_meta
-from fleetlog.wire.control import ControlRequest, Outcome
+from fleetlog.wire.control import MAX_TEXT, ControlRequest, Outcome
 from fleetlog.wire.session_meta import ACKS_NAME, META_NAME, SessionMeta
 
 __all__ = ["rigs"]  # the fixture, imported
@@ -102,6 +102,24 @@ def test_a_restart_inside_half_a_second_of_the_last_is_refused_in_the_ring(
     assert (stats.throttled, stats.commands, stats.refused_commands) == (1, 2, 1)
     rig.send("LOGGER_RESTART", "true", at=1.6)  # 0.6 s after the one that ran
     assert rig.dir != second
+
+
+@pytest.mark.parametrize("size", [10, 256, 257, 1 << 20])
+def test_a_binary_commands_ring_text_is_its_repr_cut_to_the_records_size(
+    rigs: Callable[..., Rig], size: int
+) -> None:
+    """Run or throttled, a binary LOGGER_RESTART shows in the ring as ``repr`` of its bytes,
+    cut to what a record holds (the cut made before the whole value is written out)."""
+    rig = rigs()
+    rig.rec.start()
+    value = bytes(range(256)) * (size // 256) + bytes(range(size % 256))
+    rig.send("LOGGER_RESTART", value, at=1.0)
+    rig.send("LOGGER_RESTART", value, at=1.2)  # throttled
+    whole = repr(value)
+    expected = whole if len(whole) <= MAX_TEXT else whole[: MAX_TEXT - 1] + "…"
+    ran, throttled = rig.rec.status()["commands"][-2:]
+    assert (ran["ok"], throttled["ok"]) == (True, False)
+    assert ran["text"] == throttled["text"] == expected
 
 
 def test_the_ring_keeps_the_last_64(tmp_path: Path, rigs: Callable[..., Rig]) -> None:
