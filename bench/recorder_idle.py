@@ -31,27 +31,28 @@ from pathlib import Path
 from benchlib import Helper, PLogger, RecorderProcess, cpu_ns, free_port, loadavg, spread
 
 
+def _also(work: Path, also: Path) -> RecorderProcess:
+    """The same command from another source tree (a before/after pair in one run)."""
+    (work / "also").mkdir()
+    return RecorderProcess(work / "also", free_port(), tree=also)
+
+
 def one_round(
-    seconds: float, warmup: float, moos_bin: Path | None, also: Path | None
+    seconds: float, warmup: float, moos_bin: Path | None, also: Path | None, also_first: bool
 ) -> dict[str, float]:
-    """Start everything, wait ``warmup``, measure CPU over ``seconds``: CPU-s per 10 s each."""
+    """Start everything, wait ``warmup``, measure CPU over ``seconds``: CPU-s per 10 s each.
+
+    ``also_first``: start the ``--also`` recorder before this tree's. The one started first
+    costs ~10 % more in the same window (an A/A pair showed it, docs/bench.md §18), so the
+    rounds alternate the order.
+    """
     with tempfile.TemporaryDirectory(prefix="fleetlog-idle-") as tmp:
         work = Path(tmp)
         (work / "rec").mkdir()
+        other = _also(work, also) if also is not None and also_first else None
         rec = RecorderProcess(work / "rec", free_port())
-        other = None
-        if also is not None:
-            # The same command from another source tree (a before/after pair in one run).
-            (work / "also").mkdir()
-            saved = os.environ.get("PYTHONPATH")
-            os.environ["PYTHONPATH"] = str(also)
-            try:
-                other = RecorderProcess(work / "also", free_port())
-            finally:
-                if saved is None:
-                    del os.environ["PYTHONPATH"]
-                else:
-                    os.environ["PYTHONPATH"] = saved
+        if also is not None and other is None:
+            other = _also(work, also)
         bare = Helper("counter", ["--listen", f"tcp/127.0.0.1:{free_port()}", "-n", "1000000000"])
         bare.read()
         plogger = None
@@ -97,9 +98,9 @@ def main() -> int:
         print("MOOS_BIN unset (or no pLogger in it): no pLogger baseline", file=sys.stderr)
     rounds = []
     loads = []
-    for _ in range(args.rounds):
+    for i in range(args.rounds):
         loads.append(float(loadavg()) if loadavg() != "?" else float("nan"))
-        rounds.append(one_round(args.seconds, args.warmup, moos_bin, args.also))
+        rounds.append(one_round(args.seconds, args.warmup, moos_bin, args.also, i % 2 == 1))
     names = list(rounds[0])
     load = spread(loads, "{:.1f}")
     print(f"idle CPU-s per 10 s, {args.rounds} rounds of {args.seconds:g} s, load {load}")
