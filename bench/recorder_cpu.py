@@ -181,12 +181,18 @@ def main() -> int:
         print("MOOS_BIN unset (or no pLogger in it): no pLogger baseline", file=sys.stderr)
     rounds: list[dict[str, float]] = []
     loads: list[float] = []
-    for _ in range(args.rounds):
+    for i in range(args.rounds):
         loads.append(os.getloadavg()[0])
         row = bare_round(args.n, args.rate)
+        # With --also, the two trees take turns at going first: the first of a pair can fare
+        # differently on a shared machine (recorder_idle.py's A/A pair did, by ~10 %).
+        also_first = args.also is not None and i % 2 == 1
+        if also_first:
+            with tempfile.TemporaryDirectory(prefix="fleetlog-cpu-also-") as tmp:
+                row["also"] = fleetlog_round(args.n, args.rate, Path(tmp), args.also)["fleetlog"]
         with tempfile.TemporaryDirectory(prefix="fleetlog-cpu-") as tmp:
             row.update(fleetlog_round(args.n, args.rate, Path(tmp)))
-        if args.also is not None:
+        if args.also is not None and not also_first:
             with tempfile.TemporaryDirectory(prefix="fleetlog-cpu-also-") as tmp:
                 row["also"] = fleetlog_round(args.n, args.rate, Path(tmp), args.also)["fleetlog"]
         if knob:

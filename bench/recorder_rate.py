@@ -191,7 +191,9 @@ def main() -> int:
         workdir = Path(tmp)
         for r in range(args.rounds):
             line = []
-            for w in which:
+            # The order alternates: the first of a round can fare differently on a shared
+            # machine (recorder_idle.py's A/A pair did, by ~10 %).
+            for w in which if r % 2 == 0 else which[::-1]:
                 if w == "bare":
                     res: dict[str, object] = dict(run_bare(n, keys, args.raw))
                 elif w == "format":
