@@ -628,7 +628,7 @@ def _rest(stream: LogBytes, buf: bytes, at: int, rewind: bool) -> bytes:
         return buf[at:]
     try:
         stream.seek(-rest, io.SEEK_CUR)
-    except OSError:
+    except (OSError, ValueError):  # (closed by another thread: the next read says so)
         return buf[at:]
     return b""
 

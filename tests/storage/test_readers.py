@@ -665,6 +665,25 @@ def test_a_closed_reader_refuses_new_passes() -> None:
         next(entries)  # the pass's stream was closed with the reader
 
 
+@pytest.mark.parametrize("suffix", [".alog", ".alog.gz"])
+def test_a_reader_closed_in_the_middle_of_a_pass_says_so(tmp_path: Path, suffix: str) -> None:
+    """Closed between two blocks (from another thread, say): the pass ends with the
+    reader's own error, whatever step of the block it was at."""
+    lines = reference_text(THEMOOS_ALOG).split(b"\n")
+    banner = [line for line in lines[:8] if line.startswith(b"%")]
+    entries = [line for line in lines[len(banner) :] if line and not line.startswith(b"%")]
+    log = b"\n".join(banner + entries * 200) + b"\n"  # ~250 KB
+    path = tmp_path / f"big{suffix}"
+    path.write_bytes(gzip.compress(log) if suffix.endswith(".gz") else log)
+    reader = AlogReader(path, block_size=1024)
+    entries = reader.entries()
+    next(entries)
+    reader.close()
+    with pytest.raises(StorageError, match="closed during a pass"):
+        for _ in entries:
+            pass
+
+
 def test_reader_rejects_unknown_error_policy() -> None:
     with pytest.raises(UsageError, match="errors"):
         AlogReader(THEMOOS_ALOG, errors="ignore")  # type: ignore[arg-type]
