@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import queue
+import random
 import signal
 import socket
 import subprocess
@@ -18,8 +19,35 @@ DATA = Path(__file__).resolve().parent / "data"
 REFERENCE = DATA / "reference"
 
 
+#: its own generator: hypothesis reseeds the global one inside its tests
+_PORTS = random.Random()
+
+
+def _ephemeral_low() -> int:
+    """The first port of the kernel's ephemeral range (what outgoing connections use)."""
+    try:
+        return int(Path("/proc/sys/net/ipv4/ip_local_port_range").read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        return 32768
+
+
 def free_port() -> int:
-    """Return a TCP port on 127.0.0.1 that nothing listens on right now."""
+    """Return a TCP port on 127.0.0.1 that nothing listens on right now.
+
+    Taken below the kernel's ephemeral range. A port ``bind(0)`` hands out is one the kernel
+    also gives outgoing connections: a test's router, started seconds after its port was
+    chosen (certificates, the routers before it), once found a Zenoh connection on it
+    ("Address already in use"). Below the range only another test's listener can take it.
+    """
+    low = _ephemeral_low()
+    for _ in range(100):
+        port = _PORTS.randrange(max(1024, low - 12_000), low)
+        with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue
+            return port
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
         return int(s.getsockname()[1])
