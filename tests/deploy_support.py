@@ -60,6 +60,8 @@ class SecureFleet:
         self.fleet = self.kit.load()
         self.base_env = env
         self.procs: dict[str, Proc] = {}
+        #: what the last ``fleet --json`` of :meth:`wait_vehicles` said
+        self.last_fleet = ""
 
     # -- environment of a machine
 
@@ -158,13 +160,27 @@ class SecureFleet:
         deadline = time.monotonic() + timeout
         seen: set[str] = set()
         while time.monotonic() < deadline:
-            code, out, _ = self.cli(machine, "fleet", "--json")
+            code, out, err = self.cli(machine, "fleet", "--json")
+            self.last_fleet = f"exit {code}; stdout {out[-800:]!r}; stderr {err[-800:]!r}"
             if code == 0:
                 seen = {json.loads(line)["vehicle"] for line in out.splitlines() if line}
                 if want <= seen:
                     return seen
             time.sleep(0.5)
         return seen
+
+    def diagnosis(self) -> str:
+        """What every process of the fleet said, and the last ``fleet`` listing: for a
+        failure's message (a fleet that did not come up on a busy machine)."""
+        parts = [
+            f"ports: shore {self.fleet.shore.port}, "
+            + ", ".join(f"{v} {m.port}" for v, m in self.fleet.vehicles.items())
+        ]
+        for key, proc in self.procs.items():
+            state = "running" if proc.proc.poll() is None else f"exited {proc.proc.returncode}"
+            parts.append(f"{key} ({state}): {proc.stderr[-1500:]!r}")
+        parts.append(f"last fleet listing: {self.last_fleet}")
+        return "\n".join(parts)
 
 
 def recorder_env_free(env: dict[str, str]) -> dict[str, str]:

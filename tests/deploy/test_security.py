@@ -34,7 +34,8 @@ def secure(tmp_path_factory: pytest.TempPathFactory) -> Iterator[SecureFleet]:
     fleet = SecureFleet(tmp_path_factory.mktemp("secure"), env, ("alpha", "bravo"))
     try:
         fleet.start_all()
-        assert fleet.wait_vehicles(OPS, {"alpha", "bravo"}) >= {"alpha", "bravo"}
+        seen = fleet.wait_vehicles(OPS, {"alpha", "bravo"})
+        assert seen >= {"alpha", "bravo"}, f"the fleet saw {seen}:\n{fleet.diagnosis()}"
         yield fleet
     finally:
         fleet.close()
