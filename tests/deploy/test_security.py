@@ -25,17 +25,48 @@ from fleetlog.transport.session import SessionOptions, open_session
 ALPHA, BRAVO = vehicle_dir("alpha"), vehicle_dir("bravo")
 
 
+def _start(
+    tmp_path_factory: pytest.TempPathFactory, env: dict[str, str], config: pytest.Config
+) -> SecureFleet:
+    """Two vehicles, their routers and the shore's, all up and seen by the operator.
+
+    Five processes on a shared CI machine: twice in 13 runs the fleet did not come up (a
+    router's port taken in between, once; bravo never listed in 60 s, once). It is started
+    once more, with new ports, and the first failure is written on the terminal with what
+    every process said (past pytest's capture); a second failure fails every test of the
+    module.
+    """
+    why = ""
+    for attempt in (1, 2):
+        fleet = SecureFleet(tmp_path_factory.mktemp("secure"), env, ("alpha", "bravo"))
+        try:
+            fleet.start_all()
+            seen = fleet.wait_vehicles(OPS, {"alpha", "bravo"})
+            if seen >= {"alpha", "bravo"}:
+                return fleet
+            why = f"the operator saw {sorted(seen)}:\n{fleet.diagnosis()}"
+        except AssertionError as err:
+            why = f"{err}\n{fleet.diagnosis()}"
+        fleet.close()
+        if attempt == 1:
+            reporter = config.pluginmanager.get_plugin("terminalreporter")
+            capture = config.pluginmanager.get_plugin("capturemanager")
+            if reporter is not None and capture is not None:
+                with capture.global_and_fixture_disabled():
+                    reporter.write_line(f"\nWARNING: the secured fleet did not come up: {why}")
+    pytest.fail(f"the secured fleet did not come up twice: {why}")
+
+
 @pytest.fixture(scope="module")
-def secure(tmp_path_factory: pytest.TempPathFactory) -> Iterator[SecureFleet]:
+def secure(
+    tmp_path_factory: pytest.TempPathFactory, pytestconfig: pytest.Config
+) -> Iterator[SecureFleet]:
     import os
 
     env = dict(os.environ)
     env.update(TZ="UTC", NO_COLOR="1")
-    fleet = SecureFleet(tmp_path_factory.mktemp("secure"), env, ("alpha", "bravo"))
+    fleet = _start(tmp_path_factory, env, pytestconfig)
     try:
-        fleet.start_all()
-        seen = fleet.wait_vehicles(OPS, {"alpha", "bravo"})
-        assert seen >= {"alpha", "bravo"}, f"the fleet saw {seen}:\n{fleet.diagnosis()}"
         yield fleet
     finally:
         fleet.close()
