@@ -337,12 +337,10 @@ def _ring_text(value: float | str | bytes) -> str:
     """A command's value as its ring record holds it: a string as it is, else its repr.
 
     Of a binary value, only the bytes the record can show are written out (the record
-    keeps :data:`~fleetlog.wire.control.MAX_TEXT` characters): a flood of large binary
-    commands costs the drain thread no copy of each whole. (Its quote is chosen from those
-    bytes alone, where ``repr`` of the whole value might pick the other one.)
+    keeps :data:`~fleetlog.wire.control.MAX_TEXT` characters and cuts the rest): a flood of
+    large binary commands costs the drain thread no copy of each whole. (Its quote is
+    chosen from those bytes alone, where ``repr`` of the whole value might pick the other.)
     """
     if isinstance(value, str):
         return value
-    if isinstance(value, bytes) and len(value) > MAX_TEXT:
-        return repr(value[:MAX_TEXT])[:-1] + "…"
-    return repr(value)
+    return repr(value[:MAX_TEXT] if isinstance(value, bytes) else value)

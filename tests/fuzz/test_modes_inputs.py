@@ -27,6 +27,7 @@ from fleetlog.moos.recording_modes import MAX_NOTES, check_note, parse_note
 from fleetlog.moos.units import MAX_DURATION, MAX_SIZE, parse_duration, parse_size
 from fleetlog.recorder.engine import Recorder
 from fleetlog.storage.metafile import read_meta
+from fleetlog.wire.control import MAX_TEXT
 from fleetlog.wire.message import MoosMessage
 from fleetlog.wire.replies import SessionInfo
 
@@ -149,6 +150,32 @@ def test_fuzz_mode_commands(fuzz: Fuzzer) -> None:
     finally:
         parts, notes = rig.finish()
     fuzz.note(f"{parts} parts, at most {notes} notes on one")
+
+
+def check_restart_value(rig: _ModeRig, value: str | float | bytes) -> None:
+    """Any LOGGER_RESTART value: run or throttled (0.5 s), counted, one bounded ring line."""
+    rig.clock.t += 0.3  # every other one inside the 0.5 s of the last that ran
+    before = rig.rec.stats.commands
+    rig.rec.handle(MoosMessage("LOGGER_RESTART", value, rig.clock.t, "iEvil", "", "V"))
+    assert rig.rec.stats.commands == before + 1
+    last = rig.rec.commands.recent()[-1]
+    assert last["ok"] or last["why"]
+    assert len(last["text"]) <= MAX_TEXT
+    rig.probe()
+
+
+def test_fuzz_restart_values(fuzz: Fuzzer) -> None:
+    rig = _ModeRig()
+    values = st.text(max_size=300) | st.floats() | st.binary(max_size=1 << 16)
+    try:
+        fuzz.run(values, lambda value: check_restart_value(rig, value))
+    finally:
+        rig.rec.stop()
+        parts = [d for d in (rig.where / "logs").iterdir() if d.is_dir()]
+        assert len(parts) <= 2 * (rig.clock.t - rig.began) + 2  # one restart per 0.5 s
+        assert rig.rec.stats.lost == 0
+        shutil.rmtree(rig.where, ignore_errors=True)
+    fuzz.note(f"{len(parts)} sessions, {rig.rec.stats.throttled} restarts throttled")
 
 
 def check_mission_warnings(text: str) -> None:
