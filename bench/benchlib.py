@@ -276,6 +276,21 @@ def cpu_ns(pid: int) -> int:
     return total
 
 
+#: Thread names of Zenoh's own runtimes (zenoh 1.x: rx-N, tx-N, acc-N, net-N, app-N) and of
+#: tokio workers; every other thread of a recorder is Python's (or polars', jemalloc's).
+_ZENOH_THREAD = re.compile(r"^(?:rx|tx|acc|net|app)-[0-9]+$|^tokio-")
+
+
+def zenoh_cpu_ns(pid: int) -> int:
+    """Return the nanoseconds the Zenoh runtime threads of process ``pid`` spent on a CPU."""
+    total = 0
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        with contextlib.suppress(OSError, ValueError, IndexError):  # a thread that ended
+            if _ZENOH_THREAD.match((task / "comm").read_text().strip()):
+                total += int((task / "schedstat").read_text().split()[0])
+    return total
+
+
 class PLogger:
     """A real MOOSDB and pLogger (core-moos, ``MOOS_BIN``) in ``work``, on a port of their own.
 

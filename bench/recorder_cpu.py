@@ -18,8 +18,11 @@ In each round, one after the other:
   line or no more come for 5 s (how many it logged is printed: pLogger drops what its
   queues cannot hold, and what it drops costs it nothing).
 
-CPU is read from ``/proc/PID/task/*/schedstat``. Each figure is CPU-seconds per 100,000
-messages: median [min–max] over the rounds, with the load average beside it::
+CPU is read from ``/proc/PID/task/*/schedstat``; the recorder's Zenoh runtime threads (by
+name: ``rx-N``, ``tx-N``, ``net-N``, ``app-N``, ``tokio-*``) are also summed apart, the part of
+its cost that is Zenoh's Rust code receiving the samples, before any of fleetlog's. Each
+figure is CPU-seconds per 100,000 messages: median [min–max] over the rounds, with the load
+average beside it::
 
     MOOS_BIN=/path/to/core-moos/build/bin python bench/recorder_cpu.py -n 100000 --rounds 3
 
@@ -49,6 +52,7 @@ from benchlib import (
     loadavg,
     parse_env,
     spread,
+    zenoh_cpu_ns,
 )
 
 BRIDGE = Path(__file__).resolve().with_name("bridge.py")
@@ -96,11 +100,12 @@ def fleetlog_round(
     try:
         pub.read()  # ready: its publishers match the recorder's subscription
         time.sleep(0.5)
-        before = cpu_ns(rec.proc.pid)
+        before, zenoh_before = cpu_ns(rec.proc.pid), zenoh_cpu_ns(rec.proc.pid)
         began = time.monotonic()
         pub.send("go")
         got = wait_lines(rec.alog, END.encode(), 1, progress=b"BENCH_X0")
         used = cpu_ns(rec.proc.pid) - before
+        zenoh = zenoh_cpu_ns(rec.proc.pid) - zenoh_before
         wall = time.monotonic() - began
         pub.read()
     finally:
@@ -108,7 +113,8 @@ def fleetlog_round(
         summary = rec.stop()
     if not got:
         raise RuntimeError(f"the recorder did not log {END}: {summary}")
-    return {"fleetlog": used / 1e9 * 1e5 / n, "fleetlog_wall": wall, "summary_lost": 0.0}
+    per = 1e5 / n / 1e9
+    return {"fleetlog": used * per, "zenoh": zenoh * per, "fleetlog_wall": wall}
 
 
 def bare_round(n: int, rate: float) -> dict[str, float]:
@@ -213,6 +219,7 @@ def main() -> int:
         f"load {spread(loads, '{:.1f}')} (load at {loadavg()} now)"
     )
     print(f"  fleetlog record     {spread(col('fleetlog'), '{:.3f}')}")
+    print(f"  of it Zenoh threads {spread(col('zenoh'), '{:.3f}')} (rx/tx/net/app, in Rust)")
     print(f"  bare subscriber     {spread(col('bare'), '{:.3f}')} (Zenoh's own cost)")
     added = [r["fleetlog"] - r["bare"] for r in rounds]
     print(f"  fleetlog - bare     {spread(added, '{:.3f}')} (what recording adds)")
@@ -235,6 +242,8 @@ def main() -> int:
         ratio_alone = [r["fleetlog"] / r["pLogger"] for r in rounds]
         print(f"fleetlog / (pLogger + MOOSDB): {spread(ratio_both, '{:.2f}')}x")
         print(f"fleetlog / pLogger alone:      {spread(ratio_alone, '{:.2f}')}x")
+        ratio_zenoh = [r["zenoh"] / (r["pLogger"] + r["MOOSDB"]) for r in rounds]
+        print(f"its Zenoh threads alone / (pLogger + MOOSDB): {spread(ratio_zenoh, '{:.2f}')}x")
     return 0
 
 
