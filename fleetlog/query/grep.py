@@ -29,6 +29,7 @@ from typing import TYPE_CHECKING
 
 from fleetlog.errors import StorageError
 from fleetlog.storage.columnar import AlogReader, Batch
+from fleetlog.storage.purity import PurityMemo
 from fleetlog.storage.select import Selection
 from fleetlog.wire.query import (
     REPLY_TARGET,
@@ -42,12 +43,16 @@ from fleetlog.wire.query import (
 if TYPE_CHECKING:
     import polars as pl
 
-__all__ = ["GREP_BLOCK", "EntryFilter", "run_grep"]
+__all__ = ["GREP_BLOCK", "PURITY", "EntryFilter", "run_grep"]
 
 #: Decompressed bytes parsed per step in the recorder's process (about 26k lines). Each block
 #: costs ~5 ms of fixed work besides its lines: 1 MiB blocks took 1.05 CPU s for a 77 MB log,
 #: 2 MiB 0.87, 4 MiB 0.73, for +20 and +55 MiB of peak memory a grep (docs/bench.md §9.2).
 GREP_BLOCK = 2 << 20
+#: What this process's greps learnt of which ranges of its logs hold entry lines only: a
+#: second grep of a closed session cuts only the lines holding its literals, not testing each
+#: line again (a quarter of a grep's CPU; docs/bench.md §19).
+PURITY = PurityMemo()
 _KIND = {"double": "d", "string": "s", "binary": "b"}
 _COLUMNS = ("line", "offset", "var", "source", "type", "text")
 
@@ -222,7 +227,7 @@ def run_grep(
     size = len(chunk[0])
     matched = 0
     truncated = False
-    with AlogReader(path, errors="skip", block_size=GREP_BLOCK) as reader:
+    with AlogReader(path, errors="skip", block_size=GREP_BLOCK, purity=PURITY) as reader:
         for batch in reader.frames(_COLUMNS, where=keep):
             if cancel is not None and cancel.is_set():
                 msg = "the grep was cancelled (the server is closing)"

@@ -52,6 +52,7 @@ class Parsed:
     exact: bool  # the block was valid UTF-8
     scanned: int = 0  # entries read (before ``where``)
     lines: int = 0  # lines in the block
+    pure: bool = False  # every line of the block is an entry
 
 
 def parse_block(
@@ -67,16 +68,18 @@ def parse_block(
     mark_at_end: bool,
     on_drop: Any,
     at_head: bool = False,
+    pure: bool = False,
 ) -> Parsed:
     """Parse the lines of ``text``; ``block`` is its bytes when they were not all UTF-8.
 
     ``final``: the file ends here (the cut-tail rules apply to the last entry). ``at_head``:
     the next line, not in ``text``, starts an entry, so every entry here is finished.
     Otherwise the last entry may go on in the next block: it is left out (``consumed``).
+    ``pure``: every line of ``text`` is known to be an entry (:func:`find_heads`).
     """
     col = pl.col
     line = col("l")
-    found = find_heads(pl, text, state.literals)
+    found = find_heads(pl, text, state.literals, pure=pure)
     heads, comments = found.heads, found.comments
     n = found.n
     comment_idx = comments["idx"]
@@ -179,4 +182,4 @@ def parse_block(
     )
     if block is not None:
         frame = exact_raw(pl, frame, block, state.lineno)
-    return Parsed(frame, consumed, end_mark, orphans, block is None, scanned, n)
+    return Parsed(frame, consumed, end_mark, orphans, block is None, scanned, n, found.pure)

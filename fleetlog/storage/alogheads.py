@@ -43,6 +43,11 @@ class Heads:
     is_head: pl.Series | None  # per line: entry or comment; None when every line is one
     is_entry: pl.Series | None  # per line: entry; None when every line is a head
 
+    @property
+    def pure(self) -> bool:
+        """Every line of the block is an entry (no comment, continuation or stray line)."""
+        return self.entries == self.n
+
     def entry_idx(self) -> pl.Series:
         """Return the indices of the block's entry lines (all of them, even when partial)."""
         import polars as pl
@@ -79,13 +84,19 @@ def _lines(pl: ModuleType, text: str) -> Any:
     return pl.LazyFrame({"l": [text]}).select(line.str.split("\n").explode()).with_row_index("idx")
 
 
-def find_heads(pl: ModuleType, text: str, literals: tuple[str, ...] | None = None) -> Heads:
+def find_heads(
+    pl: ModuleType, text: str, literals: tuple[str, ...] | None = None, *, pure: bool = False
+) -> Heads:
     """Split ``text`` into lines and find the entry lines, their fields and the comments.
 
     ``literals``: texts one of which every line the caller keeps holds (None: no such
     texts); with them, a block without continuation or stray lines gets the fields of the
-    lines holding one and of its last line only (``partial``).
+    lines holding one and of its last line only (``partial``). ``pure``: the block is known
+    to hold entry lines only (:mod:`fleetlog.storage.purity`), so with ``literals`` its
+    lines are not tested one by one.
     """
+    if literals and pure:
+        return _known_pure(pl, text, literals)
     if literals:
         return _selective(pl, text, literals)
     # Every line as if it had the standard layout, and whether it has: one query.
@@ -172,9 +183,33 @@ def _selective(pl: ModuleType, text: str, literals: tuple[str, ...]) -> Heads:
         parsed = lines.select(col("idx"), line, standard_layout(pl).alias("std"), *_field_exprs(pl))
         return _whole(pl, lines, parsed.drop("std"), parsed["std"], comments)
     # Every line is an entry or a comment: the entries not picked cannot be kept.
+    return Heads(n, None, _picked_fields(pl, picked), comments, entries, True, None, None)
+
+
+def _known_pure(pl: ModuleType, text: str, literals: tuple[str, ...]) -> Heads:
+    """:func:`_selective` for a block known to hold entry lines only: no per-line tests."""
+    col = pl.col
+    line = col("l")
+    base = _lines(pl, text).with_columns(maybe=line.str.contains_any(list(literals)))
+    counts, picked = pl.collect_all(
+        [
+            base.select(n=pl.len()),
+            base.filter(col("maybe") | (col("idx") == pl.len() - 1)).select(
+                col("idx"), line, standard_layout(pl).alias("std"), *_field_exprs(pl)
+            ),
+        ],
+        engine=in_memory(pl),
+    )
+    n = int(counts.item())
+    comments = pl.DataFrame(schema={"idx": pl.UInt32, "l": pl.String})
+    return Heads(n, None, _picked_fields(pl, picked), comments, n, True, None, None)
+
+
+def _picked_fields(pl: ModuleType, picked: pl.DataFrame) -> pl.DataFrame:
+    """The picked entry lines with their fields: the standard layout's, or the rule's."""
     std_mask = picked["std"]
     heads = picked.drop("std")
     if not std_mask.all():
         wide = overflow_fields(pl, heads.filter(~std_mask).select("idx", "l"))
         heads = pl.concat([heads.filter(std_mask), wide.select(heads.columns)]).sort("idx")
-    return Heads(n, None, heads, comments, entries, True, None, None)
+    return heads

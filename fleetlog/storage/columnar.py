@@ -86,6 +86,7 @@ from fleetlog.storage.columns import (
 )
 from fleetlog.storage.decompress import LogBytes, compression_of, log_kind, open_bytes
 from fleetlog.storage.ordering import Record
+from fleetlog.storage.purity import BlockSpan, FileVersion, PassPurity, PurityMemo
 from fleetlog.storage.select import Selection
 from fleetlog.storage.sessionalog import find_alog
 
@@ -139,6 +140,9 @@ class AlogReader:
         errors: the error policy.
         block_size: decompressed bytes parsed at a time; smaller blocks hold the GIL for
             less time (a recorder's remote grep uses 1 MiB), larger ones are a little faster.
+        purity: where a plain log's passes learn which of its ranges hold entry lines only,
+            and where a selective pass (``where`` with literals) looks it up, to cut fewer
+            lines (:mod:`fleetlog.storage.purity`); None: neither.
 
     Attributes:
         path: the file.
@@ -164,6 +168,7 @@ class AlogReader:
         *,
         errors: Errors = "raise",
         block_size: int = BLOCK_SIZE,
+        purity: PurityMemo | None = None,
     ) -> None:
         if errors not in ("raise", "skip"):
             msg = f"errors must be 'raise' or 'skip', not {errors!r}"
@@ -174,6 +179,7 @@ class AlogReader:
         self.path = Path(path)
         self.errors: Errors = errors
         self.block_size = block_size
+        self.purity = purity
         self.banner: Banner | None = None
         self.banner_error: FormatError | None = None
         self.truncated = False
@@ -393,6 +399,8 @@ class AlogReader:
         state = PassState(where=where, literals=literals)
         workers = min(_WORKERS, int(pl.thread_pool_size()))
         pool = ThreadPoolExecutor(workers, "fleetlog-read") if workers > 1 else None
+        purity = self._pass_purity(stream)
+        pos = 0  # where ``buf`` starts in the file (a pass starts at its beginning)
         pending: deque[Future[Parsed]] = deque()
         # A plain file's unfinished end of a block is read again with the next block (sought
         # back to, from the page cache) rather than copied in front of it: a copy of the
@@ -427,7 +435,9 @@ class AlogReader:
                     state.lineno += buf.count(b"\n", 0, cut - 1) + 1
                     state.mark = state.mark or _has_line(buf, _MARKING, cut - 1)
                     assert pool is not None
-                    pending.append(pool.submit(self._parse_job, pl, block, job, want))
+                    span = BlockSpan(purity, pos, pos + cut)
+                    pending.append(pool.submit(self._parse_job, pl, block, job, want, span))
+                    pos += cut
                     while len(pending) > workers or (pending and pending[0].done()):
                         yield from self._account(pending.popleft().result(), state)
                     size = self.block_size
@@ -437,9 +447,12 @@ class AlogReader:
                 while pending:
                     yield from self._account(pending.popleft().result(), state)
                 # (a view: the block is decoded, not copied first)
-                parsed = self._parse(pl, memoryview(buf)[:end], state, want, final=False)
+                span = BlockSpan(purity, pos, pos + end + 1)
+                parsed = self._parse(pl, memoryview(buf)[:end], state, want, final=False, span=span)
                 kept = parsed.lines - parsed.consumed
-                carry = _rest(stream, buf, line_start(buf, end, kept), rewind)
+                at = line_start(buf, end, kept)
+                carry = _rest(stream, buf, at, rewind)
+                pos += at
                 yield from self._account(parsed, state)
                 state.lineno += parsed.consumed
                 state.mark = parsed.mark
@@ -453,9 +466,23 @@ class AlogReader:
             self._open.discard(stream)
 
     def _parse_job(
-        self, pl: ModuleType, block: memoryview, job: PassState, want: frozenset[str]
+        self,
+        pl: ModuleType,
+        block: memoryview,
+        job: PassState,
+        want: frozenset[str],
+        span: BlockSpan,
     ) -> Parsed:
-        return self._parse(pl, block, job, want, final=False, at_head=True)
+        return self._parse(pl, block, job, want, final=False, at_head=True, span=span)
+
+    def _pass_purity(self, stream: LogBytes) -> PassPurity | None:
+        """The purity memo for a pass over ``stream`` (plain files only), or None."""
+        if self.purity is None or stream.compression:
+            return None
+        try:
+            return PassPurity(self.purity, FileVersion.of(stream.fileno()))
+        except (OSError, ValueError):  # (closed by another thread: the first read says so)
+            return None
 
     def _finish(
         self, pl: ModuleType, state: PassState, carry: bytes, want: frozenset[str], *, cut: bool
@@ -529,10 +556,16 @@ class AlogReader:
         complete: bool = True,
         mark_at_end: bool = False,
         at_head: bool = False,
+        span: BlockSpan | None = None,
     ) -> Parsed:
-        """Parse the whole lines of ``block`` (no trailing newline) into entries."""
+        """Parse the whole lines of ``block`` (no trailing newline) into entries.
+
+        ``span``: where the block and its newline are in the file, to look up and learn
+        whether its lines are all entries (a pass with a purity memo).
+        """
         text, exact = decode_block(block)
-        return parse_block(
+        pure = bool(state.literals) and span is not None and span.known_pure()
+        parsed = parse_block(
             pl,
             text,
             bytes(block) if not exact else None,
@@ -544,7 +577,11 @@ class AlogReader:
             mark_at_end=mark_at_end,
             on_drop=self._dropped,
             at_head=at_head,
+            pure=pure,
         )
+        if span is not None and parsed.pure and not pure:
+            span.learn()
+        return parsed
 
     def _dropped(self) -> None:
         self.truncated = True
