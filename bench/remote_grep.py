@@ -6,7 +6,11 @@ recorder caps it (``POLARS_MAX_THREADS=1``; no recorder runs: "recorder idle"). 
 interleaved:
 
 * **fetch**: ``fetch_session`` of the session (1 MiB ranges, 8 in flight, sha256, fsync);
-* **grep NAV_X**: ``FleetClient.grep`` of one variable (~9 % of the lines), every record read;
+* **grep NAV_X, first**: ``FleetClient.grep`` of one variable (~9 % of the lines), every
+  record read, in a copy of the session made for this grep alone (a log the server has not
+  read since it started: nothing learnt of it, fleetlog.storage.purity);
+* **grep NAV_X, again**: the same grep in the session itself, which the server has grepped
+  before (its warm-up grep and the rounds before);
 * **grep all**: every entry (``limit`` at its maximum), every record read.
 
 Throughput is the alog's bytes over the wall time; ratios per round against the fetch.
@@ -40,10 +44,15 @@ from fleetlog.shore.client import FleetClient
 from fleetlog.transport.session import SessionOptions
 from fleetlog.wire.query import MAX_GREP_LIMIT, GrepRequest
 
+NAV_X = GrepRequest(variables=("NAV_X",))
 REQUESTS = {
-    "grep NAV_X": GrepRequest(variables=("NAV_X",)),
+    "grep NAV_X, first": NAV_X,
+    "grep NAV_X, again": NAV_X,
     "grep all": GrepRequest(limit=MAX_GREP_LIMIT),
 }
+FIRST = "grep NAV_X, first"
+#: The session a first grep reads (a fresh copy of SESSION each round).
+COPY = "BENCH_1_1_2025_____00_01_00"
 
 # One grep from a child process (the tree on its PYTHONPATH): prints seconds and records.
 _CLIENT = """
@@ -79,13 +88,13 @@ def process_cpu(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
 
-def grep_round(endpoint: str, request: GrepRequest) -> tuple[float, int]:
+def grep_round(endpoint: str, request: GrepRequest, session: str = SESSION) -> tuple[float, int]:
     options = SessionOptions(connect=(endpoint,), multicast_scouting=False)
     with FleetClient.open(options) as client:
         client.require(VEHICLE)
         client.grep_timeout = 600.0
         started = time.perf_counter()
-        stream = client.grep(VEHICLE, SESSION, request)
+        stream = client.grep(VEHICLE, session, request)
         count = sum(1 for _ in stream)
         seconds = time.perf_counter() - started
     return seconds, count
@@ -104,12 +113,14 @@ def tree_env(tree: Path | None) -> tuple[dict[str, str], Path]:
     return {**os.environ, "PYTHONPATH": str(root)}, root
 
 
-def child_grep_round(endpoint: str, name: str, tree: Path | None) -> tuple[float, int]:
+def child_grep_round(
+    endpoint: str, name: str, tree: Path | None, session: str = SESSION
+) -> tuple[float, int]:
     """The grep from a child process of ``tree`` (this tree when None); the clock is its."""
     env, cwd = tree_env(tree)
-    which = "NAV_X" if name == "grep NAV_X" else "all"
+    which = "NAV_X" if name.startswith("grep NAV_X") else "all"
     child = subprocess.Popen(
-        [sys.executable, "-c", _CLIENT, endpoint, VEHICLE, SESSION, which],
+        [sys.executable, "-c", _CLIENT, endpoint, VEHICLE, session, which],
         stdin=subprocess.PIPE,
         stdout=subprocess.PIPE,
         text=True,
@@ -178,7 +189,7 @@ def main() -> None:
         endpoints = [s.__enter__() for s in servers]
         try:
             for endpoint in endpoints:  # warm: polars imported
-                grep_round(endpoint, REQUESTS["grep NAV_X"])
+                grep_round(endpoint, NAV_X)
             for round_ in range(args.rounds):
                 order = list(zip(trees, servers, endpoints, strict=True))
                 if round_ % 2:
@@ -190,15 +201,21 @@ def main() -> None:
                     fetch = size / seconds / 1e6
                     rates[tree]["fetch"].append(fetch)
                     assert server.proc is not None
+                    copy = work / "root" / COPY
+                    copy.mkdir()
+                    shutil.copyfile(alog, copy / f"{COPY}.alog")  # a new file: nothing learnt
+                    os.utime(copy / f"{COPY}.alog", (old, old))
                     for name, request in REQUESTS.items():
+                        session_name = COPY if name == FIRST else SESSION
                         before = process_cpu(server.proc.pid)
                         if args.also is None:
-                            seconds, _count = grep_round(endpoint, request)
+                            seconds, _count = grep_round(endpoint, request, session_name)
                         else:
-                            seconds, _count = child_grep_round(endpoint, name, tree)
+                            seconds, _count = child_grep_round(endpoint, name, tree, session_name)
                         cpus[tree][name].append(process_cpu(server.proc.pid) - before)
                         rates[tree][name].append(size / seconds / 1e6)
                         ratios[tree][name].append(rates[tree][name][-1] / fetch)
+                    shutil.rmtree(copy)
                 print(f"  round {round_ + 1} done, load {loadavg()}", flush=True)
         finally:
             for server in servers:
@@ -206,7 +223,7 @@ def main() -> None:
         for tree in trees:
             print(label[tree])
             for name, values in rates[tree].items():
-                line = f"  {name:11s} {spread(values)} MB/s"
+                line = f"  {name:18s} {spread(values)} MB/s"
                 if name in ratios[tree]:
                     line += f"   x fetch {ratio_spread(ratios[tree][name])}"
                     line += f"   vehicle CPU {ratio_spread(cpus[tree][name])} s"
