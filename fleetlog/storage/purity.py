@@ -6,9 +6,11 @@ file, whatever that pass's block boundaries. A selective pass (a grep) that know
 is such a range need not test each of its lines (the two per-line regexes, about a quarter
 of a remote grep's CPU): it cuts only the lines that hold its literals.
 
-The memo is kept in memory, per file version: device, inode, size and modification time
-in nanoseconds, taken when a pass opens the file (an appended, rewritten or replaced log is
-another version and starts unknown). It is bounded (:data:`MAX_FILES` files, LRU, and
+The memo is kept in memory, per file version: device, inode, size, and the modification
+and status-change times in nanoseconds, taken when a pass opens the file (an appended,
+rewritten or replaced log is another version and starts unknown; the status-change time,
+which no one can set, tells a new file that took a deleted one's inode, size and forged
+modification time from it). It is bounded (:data:`MAX_FILES` files, LRU, and
 :data:`MAX_RANGES` ranges a file) and shared by threads. Only plain (uncompressed) logs are
 remembered: their byte offsets are the file's own.
 """
@@ -39,12 +41,13 @@ class FileVersion:
     inode: int
     size: int
     mtime_ns: int
+    ctime_ns: int = 0
 
     @classmethod
     def of(cls, fd: int) -> FileVersion:
         """The version of the open file ``fd``."""
         st = os.fstat(fd)
-        return cls(st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+        return cls(st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns, st.st_ctime_ns)
 
 
 class _Ranges:

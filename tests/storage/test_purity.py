@@ -122,7 +122,7 @@ def test_the_second_grep_of_a_log_skips_the_line_tests(
     assert blocks - 3 <= counted.calls <= blocks
 
 
-@pytest.mark.parametrize("change", ["rewritten", "appended", "replaced"])
+@pytest.mark.parametrize("change", ["rewritten", "appended", "replaced", "recreated"])
 def test_a_changed_log_is_not_read_with_what_was_learnt_before(
     tmp_path: Path, monkeypatch: pytest.MonkeyPatch, change: str
 ) -> None:
@@ -147,6 +147,10 @@ def test_a_changed_log_is_not_read_with_what_was_learnt_before(
     elif change == "appended":  # (what was learnt still holds: but it is another version)
         with path.open("a") as f:
             f.write("x\n")
+    elif change == "recreated":  # (often with the inode the deleted file had)
+        path.unlink()
+        path.write_text(changed)
+        os.utime(path, ns=(before.mtime_ns, before.mtime_ns))
     else:
         other = tmp_path / "new.alog"
         other.write_text(changed)
