@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 
 from fleetlog.errors import FleetlogError
 from fleetlog.moos.alog import LineFormatter
-from fleetlog.storage import alogheads, columnar, purity
+from fleetlog.storage import alogheads, alogpass, purity
 from fleetlog.storage.columnar import AlogReader
 from fleetlog.storage.purity import FileVersion, PurityMemo
 from fleetlog.storage.select import Selection
@@ -90,7 +90,7 @@ def test_a_warm_selective_read_gives_what_a_read_without_the_memo_gives(
     workers: int,
     variables: list[str],
 ) -> None:
-    monkeypatch.setattr(columnar, "_WORKERS", workers)
+    monkeypatch.setattr(alogpass, "_WORKERS", workers)
     path = tmp_path / "p.alog"
     path.write_bytes(data)
     selection = Selection(variables)

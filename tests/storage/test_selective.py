@@ -25,7 +25,7 @@ from hypothesis import strategies as st
 from fleetlog.errors import FleetlogError
 from fleetlog.moos.alog import Entry
 from fleetlog.moos.patterns import glob_match
-from fleetlog.storage import columnar
+from fleetlog.storage import alogpass
 from fleetlog.storage.alogfields import entry_line, overflow_fields, standard_layout
 from fleetlog.storage.columnar import AlogReader
 from fleetlog.storage.select import Selection, glob_literal
@@ -88,7 +88,7 @@ def test_a_selective_read_gives_what_a_whole_read_gives(
 ) -> None:
     # one worker: blocks are parsed in turn, each one's last entry carried to the next (a
     # recorder's process); two: blocks cut where an entry starts, parsed side by side
-    monkeypatch.setattr(columnar, "_WORKERS", workers)
+    monkeypatch.setattr(alogpass, "_WORKERS", workers)
     path = tmp_path / "s.alog"
     path.write_bytes(data)
     selection = Selection(variables, sources, keys=keys)
