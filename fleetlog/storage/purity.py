@@ -74,33 +74,45 @@ class _Ranges:
 
 
 class PurityMemo:
-    """The entry-only ranges of recently read files, by version (thread-safe, bounded)."""
+    """The entry-only ranges of recently read files (thread-safe, bounded).
+
+    One version per file (device and inode): a newer version learnt replaces an older one, so
+    a log that grows while it is grepped again and again (the open session) holds one entry,
+    not one per grep.
+    """
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
-        self._files: OrderedDict[FileVersion, _Ranges] = OrderedDict()
+        self._files: OrderedDict[tuple[int, int], tuple[FileVersion, _Ranges]] = OrderedDict()
 
     def covers(self, version: FileVersion, start: int, end: int) -> bool:
         """Whether ``[start, end)`` of that version is known to hold entry lines only."""
+        key = (version.device, version.inode)
         with self._lock:
-            ranges = self._files.get(version)
-            if ranges is None:
+            known = self._files.get(key)
+            if known is None or known[0] != version:
                 return False
-            self._files.move_to_end(version)
-            return ranges.covers(start, end)
+            self._files.move_to_end(key)
+            return known[1].covers(start, end)
 
     def learn(self, version: FileVersion, start: int, end: int) -> None:
         """Remember that ``[start, end)`` of that version holds entry lines only."""
         if not 0 <= start < end <= version.size:
             return  # (read past the size the pass began with: the file grew meanwhile)
+        key = (version.device, version.inode)
         with self._lock:
-            ranges = self._files.get(version)
-            if ranges is None:
-                ranges = self._files[version] = _Ranges()
+            known = self._files.get(key)
+            if known is None or known[0] != version:
+                known = self._files[key] = (version, _Ranges())
                 while len(self._files) > MAX_FILES:
                     self._files.popitem(last=False)
-            self._files.move_to_end(version)
-            ranges.add(start, end)
+            self._files.move_to_end(key)
+            known[1].add(start, end)
+
+    def __len__(self) -> int:
+        """Files remembered."""
+        with self._lock:
+            return len(self._files)
 
     def clear(self) -> None:
         """Forget every file."""

@@ -188,6 +188,17 @@ def test_ranges_merge_and_cover() -> None:
     assert not memo.covers(v, 100, 200)
 
 
+def test_a_file_holds_one_version() -> None:
+    memo = PurityMemo()
+    for size in range(1000, 1100):  # a log that grows between greps
+        memo.learn(FileVersion(1, 7, size, size), 0, 500)
+    assert len(memo) == 1
+    assert memo.covers(FileVersion(1, 7, 1099, 1099), 0, 500)
+    assert not memo.covers(FileVersion(1, 7, 1098, 1098), 0, 500)  # an older version
+    memo.learn(FileVersion(1, 8, 1000, 0), 0, 500)
+    assert len(memo) == 2
+
+
 def test_the_memo_is_bounded(monkeypatch: pytest.MonkeyPatch) -> None:
     monkeypatch.setattr(purity, "MAX_FILES", 3)
     monkeypatch.setattr(purity, "MAX_RANGES", 4)
