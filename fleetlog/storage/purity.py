@@ -3,9 +3,10 @@
 Whether a line is an entry is a property of the line alone (its text too: blocks end at
 newlines, and a byte that is not UTF-8 decodes to one U+FFFD in any block), so a range of
 whole lines that held entries only when one pass read it holds entries only for any later
-pass over the same file, whatever that pass's block boundaries. A selective pass (a grep) that knows a block
-is such a range need not test each of its lines (the two per-line regexes, about a quarter
-of a remote grep's CPU): it cuts only the lines that hold its literals.
+pass over the same file, whatever that pass's block boundaries. A selective pass (a grep)
+that knows a block is such a range need not test each of its lines (the two per-line
+regexes, about a quarter of a remote grep's CPU): it cuts only the lines that hold its
+literals.
 
 The memo is kept in memory, per file version: device, inode, size, and the modification
 and status-change times in nanoseconds, taken when a pass opens the file (an appended,
