@@ -6,12 +6,14 @@ import json
 import subprocess
 from collections.abc import Callable, Iterator
 from pathlib import Path
+from typing import Any
 
 import pytest
 from alog_oracle import iter_entries
 
 from fleetlog.moos.alog import Entry
 from fleetlog.moos.mission import LoggerConfig, parse_mission
+from fleetlog.recorder.background import Background, inline
 from fleetlog.recorder.engine import Recorder
 from fleetlog.storage.metafile import read_meta
 from fleetlog.wire.control import Outcome, parse_control_request
@@ -40,7 +42,12 @@ def config(body: str) -> LoggerConfig:
 class Rig:
     """A recorder in ``tmp/logs`` with a fake clock; what it posts lands in ``posted``."""
 
-    def __init__(self, tmp: Path, body: str = "File = R\nPath = logs\nLog = A @ 0") -> None:
+    def __init__(
+        self,
+        tmp: Path,
+        body: str = "File = R\nPath = logs\nLog = A @ 0",
+        background: Background = inline,
+    ) -> None:
         (tmp / "logs").mkdir(exist_ok=True)
         (tmp / "mission").mkdir(exist_ok=True)
         self.clock = Clock()
@@ -53,6 +60,7 @@ class Rig:
             copy_dirs=[tmp / "mission"],
             clock=self.clock,
             recorder_id="zid-1",
+            background=background,
         )
 
     def send(self, name: str, value: float | str | bytes, at: float, source: str = "iOps") -> None:
@@ -98,8 +106,8 @@ def rigs(tmp_path: Path) -> Iterator[Callable[..., Rig]]:
     """Make rigs in ``tmp_path``; every recorder is stopped at the end."""
     made: list[Rig] = []
 
-    def make(body: str = "File = R\nPath = logs\nLog = A @ 0") -> Rig:
-        rig = Rig(tmp_path, body)
+    def make(body: str = "File = R\nPath = logs\nLog = A @ 0", **kwargs: Any) -> Rig:
+        rig = Rig(tmp_path, body, **kwargs)
         made.append(rig)
         return rig
 

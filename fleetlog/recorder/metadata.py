@@ -110,6 +110,10 @@ class MetadataKeeping(StorageFaults):
             try:
                 session.write_meta(data)
             except StorageError as err:
+                if session.files_removed():
+                    # The operator removed the session: one fault, counted once where the
+                    # drain notices it (_session_removed), not again for each write in flight.
+                    return
                 self._background_failed(err)
 
         self._background(write)

@@ -393,6 +393,13 @@ class SessionWriter:
         except (OSError, ValueError):
             return False
 
+    def files_removed(self) -> bool:
+        """Whether the session's files are gone: its alog unlinked, or its own directory.
+
+        Unlike :meth:`removed`, also once the session is closed (its streams with it).
+        """
+        return self.removed() or (self.layout.timestamp and not self.dir_path.is_dir())
+
     def take_unwritten(self) -> dict[str, int]:
         """Return the samples whose lines never became readable (a failed write), and forget.
 

@@ -101,6 +101,32 @@ def test_a_session_directory_removed_while_idle_is_replaced_within_a_tick(
     assert str(mark.value).startswith("reason=removed,lost=0,")
 
 
+def test_a_removal_is_one_write_error_whatever_metadata_write_was_in_flight(
+    rigs: Callable[..., Rig],
+) -> None:
+    # The background writer runs when told here: a metadata rewrite is queued, the operator
+    # removes the directory, then the rewrite runs (and fails) before the drain notices.
+    queued: list[Callable[[], None]] = []
+    rig = rigs(background=queued.append)
+    rig.rec.start()
+    for job in queued:
+        job()
+    queued.clear()
+    first = rig.dir
+    rig.send("A", 1.0, at=0.5)
+    rig.clock.t = T0 + 3.0  # the metadata is stale (a sample came) and due (2 s)
+    rig.rec.tick()
+    assert queued, "no metadata rewrite was queued"
+    shutil.rmtree(first)
+    for job in queued:
+        job()  # fails: the directory is gone
+    queued.clear()
+    rig.rec.tick()  # the drain notices the removal
+    assert rig.rec.stats.sessions == 2
+    assert rig.rec.stats.write_errors == 1
+    assert rig.rec.stats.last_error == f"the session directory logs/{first.name} was removed"
+
+
 def test_a_disk_that_refuses_writes_is_survived_and_left_as_soon_as_it_works(
     rigs: Callable[..., Rig], file_size_limit: Callable[[int], None]
 ) -> None:
